@@ -1,1 +1,85 @@
-"""placeholder"""
+"""pyopenshowvar: an asyncio client for KUKAVARPROXY, the variable server of KUKA KRC controllers.
+
+Layers (dependencies point down only)::
+
+    client / robot helpers      Client, connect, read_joint_angles, paths, outputs
+    connection                  asyncio socket, message ids, pipelining, timeouts, keep-alive
+    krl                         typed KRL values: one parser, one formatter (KRC4-exact)
+    protocol                    sans-IO codec shared with the emulator
+    errors                      the exception tree
+
+Quick start::
+
+    import asyncio
+    from pyopenshowvar import Client
+
+    async def main() -> None:
+        async with Client("127.0.0.1", 7000) as kvp:
+            print(await kvp.read_joint_angles())
+
+    asyncio.run(main())
+"""
+
+from __future__ import annotations
+
+from .client import Client, ReadResult, connect
+from .errors import (
+    KrlValueError,
+    KvpConnectionError,
+    KvpError,
+    KvpTimeoutError,
+    ProtocolError,
+    ReadFailedError,
+    UnknownVariableError,
+    VariableError,
+    WriteRefusedError,
+)
+from .krl import (
+    Axis,
+    E6Axis,
+    E6Pos,
+    Frame,
+    KrlEnum,
+    KrlValue,
+    Pos,
+    Struct,
+    format_krc4,
+    format_value,
+    parse_array,
+    parse_value,
+)
+from .robot import PathHandshake
+from .stats import AccessStats, StatsSnapshot
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "AccessStats",
+    "Axis",
+    "Client",
+    "E6Axis",
+    "E6Pos",
+    "Frame",
+    "KrlEnum",
+    "KrlValue",
+    "KrlValueError",
+    "KvpConnectionError",
+    "KvpError",
+    "KvpTimeoutError",
+    "PathHandshake",
+    "Pos",
+    "ProtocolError",
+    "ReadFailedError",
+    "ReadResult",
+    "StatsSnapshot",
+    "Struct",
+    "UnknownVariableError",
+    "VariableError",
+    "WriteRefusedError",
+    "__version__",
+    "connect",
+    "format_krc4",
+    "format_value",
+    "parse_array",
+    "parse_value",
+]

@@ -77,7 +77,9 @@ class WriteRefusedError(VariableError):
     ``value`` holds the text that was sent.
     """
 
-    def __init__(self, message: str, *, name: str = "", endpoint: str = "", value: str = "") -> None:
+    def __init__(
+        self, message: str, *, name: str = "", endpoint: str = "", value: str = ""
+    ) -> None:
         super().__init__(message, name=name, endpoint=endpoint)
         self.value = value
 

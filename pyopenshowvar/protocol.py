@@ -179,7 +179,9 @@ def encode_write_array(msg_id: int, name: str | bytes, words: Iterable[int]) -> 
         payload = b"".join(_U16.pack(w) for w in words)
     except struct.error as exc:
         raise ProtocolError(f"array word out of range 0..65535: {exc}") from exc
-    body = bytes((Mode.WRITE_ARRAY,)) + _block(_text(name, "name"), "name") + _block(payload, "value")
+    body = (
+        bytes((Mode.WRITE_ARRAY,)) + _block(_text(name, "name"), "name") + _block(payload, "value")
+    )
     return _frame(msg_id, body)
 
 
@@ -209,7 +211,9 @@ def _split(frame: bytes | bytearray | memoryview) -> tuple[int, memoryview]:
         raise ProtocolError(f"frame of {len(view)} bytes is shorter than the 4-byte header")
     msg_id, length = _HEADER.unpack_from(view)
     if length != len(view) - HEADER_SIZE:
-        raise ProtocolError(f"length field {length} does not match {len(view) - HEADER_SIZE} content bytes")
+        raise ProtocolError(
+            f"length field {length} does not match {len(view) - HEADER_SIZE} content bytes"
+        )
     return msg_id, view[HEADER_SIZE:]
 
 
@@ -254,7 +258,9 @@ def decode_reply(frame: bytes | bytearray | memoryview) -> Reply:
         raise ProtocolError(f"reply content of {len(body)} bytes is shorter than the minimum 6")
     value, pos = _take_block(body, 1, "value")
     if pos + 3 != len(body):
-        raise ProtocolError(f"reply value length {len(value)} inconsistent with L = {len(body)} (expected V + 6)")
+        raise ProtocolError(
+            f"reply value length {len(value)} inconsistent with L = {len(body)} (expected V + 6)"
+        )
     return Reply(msg_id, body[0], value, body[pos + 2], bytes(body[pos : pos + 2]))
 
 

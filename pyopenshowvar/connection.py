@@ -1,0 +1,359 @@
+"""One asyncio TCP connection to a KUKAVARPROXY: ids, pipelining, timeouts, keep-alive.
+
+Design choices, each forced by how the real proxy behaves (protocol reference §1.4, §2.5, §2.6):
+
+* **Each request is one ``transport.write``** with TCP_NODELAY, because KVP does not reassemble
+  a request cut across two TCP reads.
+* **Pipelining is bounded** by a request count and by the bytes of unanswered requests
+  (default 2048, the size of KVP's single ``Read``), so a burst can never be cut at the proxy's
+  buffer boundary.
+* **Reply matching.** Servers answer in order. A reply is matched by id when the id is pending;
+  requests sent *before* that one and still unanswered were silently dropped by the proxy (its
+  "reading pending" path) and fail at once instead of waiting for their timeout. A reply whose id
+  is not pending while requests are outstanding is the pre-9.0 quirk (every reply of a batch
+  carries the first id): it goes to the oldest outstanding request (FIFO), which is what the
+  server did answer. ``id_policy="strict"`` instead treats such a reply as a protocol error and
+  drops the connection; ``"fifo"`` ignores ids entirely.
+* **Timeouts never desynchronise.** A timed-out request keeps its place in the queue, marked
+  abandoned; its late reply is recognised and discarded.
+* **Connection loss fails every pending call at once** with :class:`KvpConnectionError`.
+* **Keep-alive**: after ``keepalive`` seconds without traffic a ``PING`` is sent (KVP 9.0 answers
+  ``PONG``); an older proxy answers an empty value, and from then on a cheap read of ``$OV_PRO``
+  is used instead, keeping the proxy's 30 s idle timer from closing the connection.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import socket
+import time
+from collections import deque
+from collections.abc import Callable
+from typing import Literal
+
+from .errors import KvpConnectionError, KvpTimeoutError, ProtocolError
+from .protocol import MAX_ID, Reply, ReplyDecoder, encode_read, encode_write
+from .stats import AccessStats
+
+__all__ = ["Connection", "IdPolicy"]
+
+log = logging.getLogger(__name__)
+
+IdPolicy = Literal["auto", "strict", "fifo"]
+#: Builds a complete request frame for a given message id.
+_Builder = Callable[[int], bytes]
+
+
+class _Pending:
+    __slots__ = ("abandoned", "future", "msg_id", "name", "sent_at", "size")
+
+    def __init__(self, msg_id: int, name: str, size: int, future: asyncio.Future[Reply]) -> None:
+        self.msg_id = msg_id
+        self.name = name
+        self.size = size
+        self.future = future
+        self.sent_at = 0.0
+        self.abandoned = False
+
+
+class _Protocol(asyncio.Protocol):
+    """Feeds received bytes to the owning connection; kept tiny on purpose (hot path)."""
+
+    def __init__(self, owner: Connection) -> None:
+        self.owner = owner
+
+    def data_received(self, data: bytes) -> None:
+        self.owner._on_data(data)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self.owner._on_lost(exc)
+
+
+class Connection:
+    """A connected KVP session. Use :meth:`open`; normally wrapped by :class:`~pyopenshowvar.Client`."""
+
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        *,
+        timeout: float = 2.0,
+        max_in_flight: int = 64,
+        pipeline_bytes: int = 2048,
+        id_policy: IdPolicy = "auto",
+        keepalive: float | None = 10.0,
+    ) -> None:
+        self.host = host
+        self.port = port
+        self.timeout = timeout
+        self.max_in_flight = max(1, max_in_flight)
+        self.pipeline_bytes = max(1, pipeline_bytes)
+        self.id_policy = id_policy
+        self.keepalive = keepalive
+        self.stats = AccessStats()
+        #: Replies whose id was not pending and were given to the oldest request (pre-9.0 quirk).
+        self.mislabeled_replies = 0
+        #: Requests the server never answered (detected when a later reply arrived).
+        self.dropped_requests = 0
+        self._transport: asyncio.Transport | None = None
+        self._decoder = ReplyDecoder()
+        self._queue: deque[_Pending] = deque()
+        self._by_id: dict[int, _Pending] = {}
+        self._bytes_in_flight = 0
+        self._next_id = 0
+        self._slot = asyncio.Event()
+        self._closed_exc: Exception | None = None
+        self._last_activity = time.monotonic()
+        self._keepalive_task: asyncio.Task[None] | None = None
+        self._ping_supported: bool | None = None
+
+    @property
+    def endpoint(self) -> str:
+        return f"{self.host}:{self.port}"
+
+    def use_stats(self, stats: AccessStats) -> None:
+        """Record into ``stats`` (the client keeps one object across reconnects)."""
+        self.stats = stats
+
+    @property
+    def is_open(self) -> bool:
+        return self._transport is not None and self._closed_exc is None
+
+    @property
+    def in_flight(self) -> int:
+        return len(self._queue)
+
+    # ------------------------------------------------------------------ life cycle
+
+    @classmethod
+    async def open(
+        cls, host: str, port: int, *, connect_timeout: float | None = None, **kw: object
+    ) -> Connection:
+        conn = cls(host, port, **kw)  # type: ignore[arg-type]
+        await conn._connect(connect_timeout if connect_timeout is not None else conn.timeout)
+        return conn
+
+    async def _connect(self, timeout: float) -> None:
+        loop = asyncio.get_running_loop()
+        try:
+            async with asyncio.timeout(timeout):
+                transport, _ = await loop.create_connection(
+                    lambda: _Protocol(self), self.host, self.port
+                )
+        except TimeoutError as exc:
+            raise KvpTimeoutError(
+                f"connecting to {self.endpoint} timed out after {timeout:g} s"
+            ) from exc
+        except OSError as exc:
+            raise KvpConnectionError(
+                f"cannot connect to {self.endpoint}: {exc.strerror or exc}"
+            ) from exc
+        sock = transport.get_extra_info("socket")
+        if sock is not None:
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        assert isinstance(transport, asyncio.Transport)
+        self._transport = transport
+        self._last_activity = time.monotonic()
+        if self.keepalive:
+            self._keepalive_task = asyncio.get_running_loop().create_task(self._keepalive_loop())
+        log.debug("connected to %s", self.endpoint)
+
+    async def close(self) -> None:
+        """Close the socket; pending calls fail with KvpConnectionError."""
+        if self._keepalive_task is not None:
+            self._keepalive_task.cancel()
+            self._keepalive_task = None
+        if self._transport is not None and self._closed_exc is None:
+            self._transport.close()
+            self._fail_all(KvpConnectionError(f"connection to {self.endpoint} closed"))
+            # give the transport a chance to really close the socket
+            await asyncio.sleep(0)
+
+    # ------------------------------------------------------------------ requests
+
+    async def read(self, name: str, *, timeout: float | None = None) -> Reply:
+        return await self._request(name, lambda i: encode_read(i, name), timeout)
+
+    async def write(self, name: str, value: str, *, timeout: float | None = None) -> Reply:
+        return await self._request(name, lambda i: encode_write(i, name, value), timeout)
+
+    async def request_frame(
+        self, name: str, build: _Builder, *, timeout: float | None = None
+    ) -> Reply:
+        """Send a frame made by ``build(msg_id)`` (used for modes 2/3 and tests)."""
+        return await self._request(name, build, timeout)
+
+    def _alloc_id(self) -> int:
+        # Skip ids still pending (abandoned requests keep theirs until answered).
+        for _ in range(MAX_ID + 1):
+            msg_id = self._next_id
+            self._next_id = (self._next_id + 1) & MAX_ID
+            if msg_id not in self._by_id:
+                return msg_id
+        raise ProtocolError("no free message id")  # pragma: no cover - needs 65536 pending
+
+    async def _request(self, name: str, build: _Builder, timeout: float | None) -> Reply:
+        timeout = self.timeout if timeout is None else timeout
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + timeout
+        pending: _Pending | None = None
+        try:
+            async with asyncio.timeout_at(deadline):
+                while True:
+                    self._check_open()
+                    if len(self._queue) < self.max_in_flight and (
+                        not self._queue or self._bytes_in_flight < self.pipeline_bytes
+                    ):
+                        break
+                    self._slot.clear()
+                    await self._slot.wait()
+                msg_id = self._alloc_id()
+                frame = build(msg_id)
+                pending = _Pending(msg_id, name, len(frame), loop.create_future())
+                self._queue.append(pending)
+                self._by_id[msg_id] = pending
+                self._bytes_in_flight += pending.size
+                assert self._transport is not None
+                pending.sent_at = time.perf_counter()
+                self._last_activity = time.monotonic()
+                self._transport.write(frame)
+                return await asyncio.shield(pending.future)
+        except TimeoutError:
+            raise KvpTimeoutError(
+                f"no reply for {name!r} from {self.endpoint} within {timeout:g} s"
+            ) from None
+        finally:
+            # Mark an unanswered request abandoned so its late reply is discarded.
+            if pending is not None and not pending.future.done():
+                pending.abandoned = True
+
+    def _check_open(self) -> None:
+        if self._closed_exc is not None:
+            raise KvpConnectionError(f"connection to {self.endpoint} is closed: {self._closed_exc}")
+        if self._transport is None:
+            raise KvpConnectionError(f"not connected to {self.endpoint}")
+
+    # ------------------------------------------------------------------ receiving
+
+    def _on_data(self, data: bytes) -> None:
+        try:
+            replies = self._decoder.feed_replies(data)
+        except ProtocolError as exc:
+            log.warning("protocol error from %s: %s", self.endpoint, exc)
+            self._abort(exc)
+            return
+        now = time.perf_counter()
+        for reply in replies:
+            self._dispatch(reply, now)
+        self._last_activity = time.monotonic()
+
+    def _dispatch(self, reply: Reply, now: float) -> None:
+        pending = self._by_id.get(reply.msg_id) if self.id_policy != "fifo" else None
+        if pending is not None:
+            # Requests ahead of it were dropped by the server: it never reorders.
+            while self._queue and self._queue[0] is not pending:
+                lost = self._queue[0]
+                self._finish(lost)
+                self.dropped_requests += 1
+                if not lost.future.done():
+                    lost.future.set_exception(
+                        KvpTimeoutError(
+                            f"{self.endpoint} never answered the request for {lost.name!r}"
+                        )
+                    )
+        elif self._queue:
+            if self.id_policy == "strict":
+                self._abort(ProtocolError(f"reply id {reply.msg_id} matches no request"))
+                return
+            pending = self._queue[0]
+            if self.id_policy == "auto":
+                self.mislabeled_replies += 1
+                if self.mislabeled_replies == 1:
+                    log.warning(
+                        "%s answers with wrong message ids (pre-9.0 proxy?); matching in order",
+                        self.endpoint,
+                    )
+        else:
+            log.debug("discarding unexpected reply id %d from %s", reply.msg_id, self.endpoint)
+            return
+        self._finish(pending)
+        if pending.abandoned or pending.future.done():
+            return
+        self.stats.record(now - pending.sent_at)
+        pending.future.set_result(reply)
+
+    def _finish(self, pending: _Pending) -> None:
+        if self._queue and self._queue[0] is pending:
+            self._queue.popleft()
+        else:  # pragma: no cover - defensive, the queue head is always the match
+            self._queue.remove(pending)
+        if self._by_id.get(pending.msg_id) is pending:
+            del self._by_id[pending.msg_id]
+        self._bytes_in_flight -= pending.size
+        self._slot.set()
+
+    def _on_lost(self, exc: Exception | None) -> None:
+        try:
+            self._decoder.eof()
+            reason: Exception = KvpConnectionError(
+                f"{self.endpoint} closed the connection" + (f": {exc}" if exc else "")
+            )
+        except ProtocolError:
+            reason = KvpConnectionError(
+                f"{self.endpoint} closed the connection in the middle of a reply"
+            )
+        self._fail_all(reason)
+
+    def _abort(self, exc: Exception) -> None:
+        if self._transport is not None:
+            self._transport.abort()
+        self._fail_all(KvpConnectionError(f"connection to {self.endpoint} dropped: {exc}"))
+
+    def _fail_all(self, exc: Exception) -> None:
+        if self._closed_exc is None:
+            self._closed_exc = exc
+        while self._queue:
+            p = self._queue.popleft()
+            if not p.future.done():
+                p.future.set_exception(exc)
+                # mark retrieved so asyncio does not warn about abandoned futures
+                if p.abandoned:
+                    p.future.exception()
+        self._by_id.clear()
+        self._bytes_in_flight = 0
+        self._slot.set()
+        if self._keepalive_task is not None and self._keepalive_task is not asyncio.current_task():
+            self._keepalive_task.cancel()
+
+    # ------------------------------------------------------------------ keep-alive
+
+    async def _keepalive_loop(self) -> None:
+        assert self.keepalive
+        interval = self.keepalive
+        while self.is_open:
+            idle = time.monotonic() - self._last_activity
+            if idle < interval:
+                await asyncio.sleep(interval - idle)
+                continue
+            try:
+                await self.ping()
+            except (KvpTimeoutError, KvpConnectionError) as exc:
+                log.info("keep-alive to %s failed: %s", self.endpoint, exc)
+                if not self.is_open:
+                    return
+
+    async def ping(self, *, timeout: float | None = None) -> float:
+        """Round trip of a keep-alive request in seconds (``PING`` or, on old proxies, ``$OV_PRO``)."""
+        start = time.perf_counter()
+        if self._ping_supported is not False:
+            reply = await self.read("PING", timeout=timeout)
+            if reply.ok and reply.value == b"PONG":
+                self._ping_supported = True
+                return time.perf_counter() - start
+            self._ping_supported = False
+            log.info(
+                "%s does not answer PING (pre-9.0 proxy); keeping alive with $OV_PRO", self.endpoint
+            )
+        await self.read("$OV_PRO", timeout=timeout)
+        return time.perf_counter() - start

@@ -1,0 +1,267 @@
+"""Client fault tests against deliberately broken servers (the only place mocks are allowed).
+
+Each server here is a real asyncio TCP server on 127.0.0.1 that misbehaves in one specific way:
+drops a reply, splits frames, closes mid-frame, stalls, mislabels ids like a pre-9.0 proxy.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import AsyncIterator, Awaitable, Callable
+from contextlib import asynccontextmanager
+
+import pytest
+
+from pyopenshowvar import (
+    Client,
+    KvpConnectionError,
+    KvpTimeoutError,
+    ReadFailedError,
+    UnknownVariableError,
+    WriteRefusedError,
+)
+from pyopenshowvar.protocol import Mode, Reply, Request, RequestDecoder, encode_reply
+
+# A handler gets each decoded request and the writer; it decides what (if anything) to send.
+Handler = Callable[[Request, asyncio.StreamWriter, int], Awaitable[None]]
+
+
+def answer(req: Request, value: bytes | None = None, status: int = 1) -> bytes:
+    """A correct KVP 9.0 reply: reads answer NAME-derived text, writes echo."""
+    if value is None:
+        value = req.value if req.mode == Mode.WRITE else f"v:{req.name}".encode()
+    assert value is not None
+    return encode_reply(Reply(req.msg_id, req.mode, value, status))
+
+
+@asynccontextmanager
+async def broken_server(handler: Handler) -> AsyncIterator[int]:
+    counter = 0
+
+    async def serve(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        nonlocal counter
+        dec = RequestDecoder()
+        try:
+            while data := await reader.read(65536):
+                for req in dec.feed_requests(data):
+                    counter += 1
+                    await handler(req, writer, counter)
+        except (ConnectionError, asyncio.CancelledError):
+            pass
+        finally:
+            writer.close()
+
+    server = await asyncio.start_server(serve, "127.0.0.1", 0)
+    port = server.sockets[0].getsockname()[1]
+    try:
+        yield port
+    finally:
+        server.close()
+
+
+async def test_dropped_reply_times_out_and_connection_stays_usable() -> None:
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        if n != 1:  # the first request is never answered
+            w.write(answer(req))
+
+    async with broken_server(handler) as port, Client(port=port, timeout=0.3) as kvp:
+        t0 = time.monotonic()
+        with pytest.raises(KvpTimeoutError) as info:
+            await kvp.read("$OV_PRO")
+        assert 0.25 < time.monotonic() - t0 < 1.5
+        assert "$OV_PRO" in str(info.value) and str(port) in str(info.value)
+        assert isinstance(info.value, TimeoutError)
+        assert await kvp.read("$AXIS_ACT") == "v:$AXIS_ACT"
+
+
+async def test_dropped_reply_is_detected_when_the_next_reply_arrives() -> None:
+    # The server silently skips request 1 of a pipelined pair; the client must not hand
+    # request 2's reply to request 1 and must fail request 1 without waiting for its timeout.
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        if n == 1:
+            return
+        await asyncio.sleep(0.01)
+        w.write(answer(req))
+
+    async with broken_server(handler) as port, Client(port=port, timeout=5.0) as kvp:
+        t0 = time.monotonic()
+        r1, r2 = await asyncio.gather(kvp.read("A"), kvp.read("B"), return_exceptions=True)
+        assert isinstance(r1, KvpTimeoutError)
+        assert r2 == "v:B"
+        assert time.monotonic() - t0 < 1.0
+        assert kvp.connection is not None and kvp.connection.dropped_requests == 1
+
+
+async def test_late_reply_after_timeout_is_discarded() -> None:
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        if n == 1:
+            await asyncio.sleep(0.4)  # stall: answer arrives after the client gave up
+        w.write(answer(req))
+
+    async with broken_server(handler) as port, Client(port=port, timeout=0.2) as kvp:
+        with pytest.raises(KvpTimeoutError):
+            await kvp.read("SLOW")
+        # the next call must get its own answer, not the late one for SLOW
+        assert await kvp.read("FAST", timeout=2.0) == "v:FAST"
+
+
+async def test_split_frames_are_reassembled() -> None:
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        frame = answer(req, b"{E6AXIS: A1 1.0, A2 2.0}" * 20)
+        for i in range(len(frame)):
+            w.write(frame[i : i + 1])
+            await w.drain()
+            if i % 50 == 0:
+                await asyncio.sleep(0.001)
+
+    async with broken_server(handler) as port, Client(port=port) as kvp:
+        assert await kvp.read("$AXIS_ACT") == "{E6AXIS: A1 1.0, A2 2.0}" * 20
+
+
+async def test_close_mid_frame_fails_every_pending_call_at_once() -> None:
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        if n == 3:
+            w.write(answer(req)[:5])
+            await w.drain()
+            w.close()
+
+    async with broken_server(handler) as port, Client(port=port, timeout=5.0) as kvp:
+        t0 = time.monotonic()
+        results = await asyncio.gather(
+            *(kvp.read(f"V{i}") for i in range(5)), return_exceptions=True
+        )
+        assert all(isinstance(r, KvpConnectionError) for r in results)
+        assert "middle of a reply" in str(results[0])
+        assert time.monotonic() - t0 < 1.0
+        with pytest.raises(KvpConnectionError):
+            await kvp.read("AFTER")
+
+
+async def test_auto_reconnect_after_drop() -> None:
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        if n == 1:
+            w.close()
+            return
+        w.write(answer(req))
+
+    async with broken_server(handler) as port, Client(port=port, auto_reconnect=True) as kvp:
+        with pytest.raises(KvpConnectionError):
+            await kvp.write("MYINT", "1")  # a write in flight is failed, never resent
+        assert await kvp.read("X") == "v:X"
+        assert kvp.reconnects == 1
+
+
+async def test_legacy_proxy_ids_matched_in_order() -> None:
+    # Pre-9.0 KVP: every reply of a batch carries the first request's id.
+    batch: list[Request] = []
+
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        batch.append(req)
+        if len(batch) == 4:
+            first = batch[0].msg_id
+            for r in batch:
+                w.write(encode_reply(Reply(first, r.mode, f"v:{r.name}".encode())))
+            batch.clear()
+
+    async with broken_server(handler) as port, Client(port=port) as kvp:
+        results = await asyncio.gather(*(kvp.read(f"N{i}") for i in range(4)))
+        assert results == ["v:N0", "v:N1", "v:N2", "v:N3"]
+        assert kvp.connection is not None and kvp.connection.mislabeled_replies == 3
+
+    async with broken_server(handler) as port, Client(port=port, id_policy="strict") as kvp:
+        results = await asyncio.gather(
+            *(kvp.read(f"N{i}") for i in range(4)), return_exceptions=True
+        )
+        assert results[0] == "v:N0"
+        assert all(isinstance(r, KvpConnectionError) for r in results[1:])
+
+
+async def test_status_and_empty_value_outcomes() -> None:
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        if req.name == "UNKNOWN":
+            w.write(answer(req, b""))
+        elif req.name == "FAIL":
+            w.write(answer(req, b"", status=0))
+        elif req.mode == Mode.WRITE:
+            w.write(answer(req, status=0))  # KVP echoes the value with a failure status
+        else:
+            w.write(answer(req))
+
+    async with broken_server(handler) as port, Client(port=port) as kvp:
+        with pytest.raises(UnknownVariableError) as unk:
+            await kvp.read("UNKNOWN")
+        assert isinstance(unk.value, LookupError) and "UNKNOWN" in str(unk.value)
+        with pytest.raises(ReadFailedError):
+            await kvp.read("FAIL")
+        with pytest.raises(WriteRefusedError) as ref:
+            await kvp.write("$AXIS_ACT", "{A1 1}")
+        assert ref.value.value == "{A1 1}" and "$AXIS_ACT" in str(ref.value)
+        res = await kvp.read_many(["A", "UNKNOWN", "B"])
+        assert res["A"].text == "v:A" and res["B"].ok
+        assert isinstance(res["UNKNOWN"].error, UnknownVariableError)
+
+
+async def test_unknown_mode_four_byte_reply() -> None:
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        w.write(encode_reply(Reply(req.msg_id, None)))
+
+    async with broken_server(handler) as port, Client(port=port) as kvp:
+        with pytest.raises(ReadFailedError, match="mode"):
+            await kvp.read_array_words("ARR[]")
+
+
+async def test_stalled_server_keeps_every_call_bounded() -> None:
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        await asyncio.sleep(10)
+
+    async with broken_server(handler) as port, Client(port=port, timeout=0.2) as kvp:
+        t0 = time.monotonic()
+        results = await asyncio.gather(
+            *(kvp.read(f"S{i}") for i in range(10)), return_exceptions=True
+        )
+        assert all(isinstance(r, KvpTimeoutError) for r in results)
+        assert time.monotonic() - t0 < 1.0
+        # a per-call override is honoured
+        t0 = time.monotonic()
+        with pytest.raises(KvpTimeoutError):
+            await kvp.read("S", timeout=0.05)
+        assert time.monotonic() - t0 < 0.5
+
+
+async def test_connect_errors_are_clear() -> None:
+    server = await asyncio.start_server(lambda r, w: None, "127.0.0.1", 0)
+    port = server.sockets[0].getsockname()[1]
+    server.close()
+    await server.wait_closed()
+    with pytest.raises(KvpConnectionError) as info:
+        async with Client(port=port, timeout=0.5):
+            pass
+    assert f"127.0.0.1:{port}" in str(info.value)
+    assert isinstance(info.value, ConnectionError)
+
+
+async def test_id_wrap_and_skip_pending_ids() -> None:
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        w.write(answer(req, str(req.msg_id).encode()))
+
+    async with broken_server(handler) as port, Client(port=port) as kvp:
+        conn = kvp.connection
+        assert conn is not None
+        conn._next_id = 65534
+        ids = [int(await kvp.read("ID")) for _ in range(4)]
+        assert ids == [65534, 65535, 0, 1]
+
+
+async def test_keepalive_falls_back_to_a_cheap_read_on_old_proxies() -> None:
+    seen: list[str] = []
+
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        seen.append(req.name)
+        # an old proxy passes PING to CrossComm: empty value, success
+        w.write(answer(req, b"" if req.name == "PING" else b"100"))
+
+    async with broken_server(handler) as port, Client(port=port, keepalive=0.05) as kvp:
+        await asyncio.sleep(0.4)
+        assert kvp.connected
+    assert seen[0] == "PING" and "$OV_PRO" in seen and seen.count("PING") == 1
