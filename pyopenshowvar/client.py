@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from types import TracebackType
 from typing import Any
@@ -31,7 +31,7 @@ from .errors import (
     WriteRefusedError,
 )
 from .krl import KrlValue, format_value, parse_value
-from .protocol import Reply, encode_read_array, encode_write_array
+from .protocol import Reply, encode_read, encode_read_array, encode_write, encode_write_array
 from .robot import RobotHelpers
 from .stats import AccessStats
 
@@ -238,16 +238,10 @@ class Client(RobotHelpers):
         """
         names = list(names)
         conn = await self._connection()
-        replies = await asyncio.gather(
-            *(conn.read(n, timeout=timeout) for n in names), return_exceptions=True
-        )
+        replies = await conn.request_many([(n, _reader(n)) for n in names], timeout=timeout)
         out: dict[str, ReadResult] = {}
         for name, reply in zip(names, replies, strict=True):
-            if isinstance(reply, KvpConnectionError):
-                raise reply
-            if isinstance(reply, BaseException):
-                if not isinstance(reply, KvpError):
-                    raise reply
+            if isinstance(reply, KvpError):
                 out[name] = ReadResult(name, error=reply)
                 continue
             try:
@@ -262,13 +256,20 @@ class Client(RobotHelpers):
     async def write_many(
         self, items: Sequence[tuple[str, KrlValue | str]], *, timeout: float | None = None
     ) -> None:
-        """Write several variables pipelined, in order; raises the first refusal after all answered."""
-        results = await asyncio.gather(
-            *(self.write(n, v, timeout=timeout) for n, v in items), return_exceptions=True
-        )
-        for r in results:
-            if isinstance(r, BaseException):
-                raise r
+        """Write several variables pipelined, in order; raises the first failure after all answered."""
+        texts = [(n, v if isinstance(v, str) else format_value(v)) for n, v in items]
+        conn = await self._connection()
+        replies = await conn.request_many([(n, _writer(n, t)) for n, t in texts], timeout=timeout)
+        for (name, text), reply in zip(texts, replies, strict=True):
+            if isinstance(reply, KvpError):
+                raise reply
+            if not reply.ok:
+                raise WriteRefusedError(
+                    "write refused (read-only, unknown variable or wrong type)",
+                    name=name,
+                    endpoint=self.endpoint,
+                    value=text,
+                )
 
     # ------------------------------------------------------------------ PLC array modes
 
@@ -309,6 +310,14 @@ class Client(RobotHelpers):
             return await self.read("@PROXY_TYPE")
         except (UnknownVariableError, ReadFailedError):
             return None
+
+
+def _reader(name: str) -> Callable[[int], bytes]:
+    return lambda msg_id: encode_read(msg_id, name)
+
+
+def _writer(name: str, text: str) -> Callable[[int], bytes]:
+    return lambda msg_id: encode_write(msg_id, name, text)
 
 
 def connect(host: str = "127.0.0.1", port: int = 7000, **kw: Any) -> Client:

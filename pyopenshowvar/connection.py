@@ -32,7 +32,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import Literal
 
-from .errors import KvpConnectionError, KvpTimeoutError, ProtocolError
+from .errors import KvpConnectionError, KvpError, KvpTimeoutError, ProtocolError
 from .protocol import MAX_ID, Reply, ReplyDecoder, encode_read, encode_write
 from .stats import AccessStats
 
@@ -193,40 +193,112 @@ class Connection:
                 return msg_id
         raise ProtocolError("no free message id")  # pragma: no cover - needs 65536 pending
 
+    def _fits(self, size: int) -> bool:
+        if not self._queue:
+            return True  # a lone request always goes, whatever its size
+        return (
+            len(self._queue) < self.max_in_flight
+            and self._bytes_in_flight + size <= self.pipeline_bytes
+        )
+
+    async def _wait_for_room(self, size: int, deadline: float) -> None:
+        while True:
+            self._check_open()
+            if self._fits(size):
+                return
+            self._slot.clear()
+            async with asyncio.timeout_at(deadline):
+                await self._slot.wait()
+
+    def _register(
+        self, name: str, frame0: bytes, loop: asyncio.AbstractEventLoop
+    ) -> tuple[_Pending, bytes]:
+        """Give ``frame0`` (built with id 0) a free id and queue it; returns the final frame."""
+        msg_id = self._alloc_id()
+        # ids are the first two bytes of every frame, so re-stamping is exact and cheap
+        frame = msg_id.to_bytes(2, "big") + frame0[2:]
+        pending = _Pending(msg_id, name, len(frame), loop.create_future())
+        self._queue.append(pending)
+        self._by_id[msg_id] = pending
+        self._bytes_in_flight += pending.size
+        return pending, frame
+
+    def _expire(self, pendings: list[_Pending], timeout: float) -> None:
+        for p in pendings:
+            if not p.future.done():
+                p.abandoned = True
+                p.future.set_exception(
+                    KvpTimeoutError(
+                        f"no reply for {p.name!r} from {self.endpoint} within {timeout:g} s"
+                    )
+                )
+
     async def _request(self, name: str, build: _Builder, timeout: float | None) -> Reply:
+        results = await self.request_many([(name, build)], timeout=timeout)
+        result = results[0]
+        if isinstance(result, BaseException):
+            raise result
+        return result
+
+    async def request_many(
+        self, items: list[tuple[str, _Builder]], *, timeout: float | None = None
+    ) -> list[Reply | KvpError]:
+        """Send many requests pipelined and return a reply or an error for each, in order.
+
+        Requests are coalesced into as few socket writes as the pipelining bounds allow (every
+        write holds only whole requests). A lost connection fails the whole call; a timeout
+        fails the requests still unanswered at the deadline.
+        """
         timeout = self.timeout if timeout is None else timeout
         loop = asyncio.get_running_loop()
         deadline = loop.time() + timeout
-        pending: _Pending | None = None
+        pendings: list[_Pending] = []
+        results: list[Reply | KvpError] = []
+        batch: list[bytes] = []
+        timer = loop.call_at(deadline, self._expire, pendings, timeout)
         try:
-            async with asyncio.timeout_at(deadline):
-                while True:
-                    self._check_open()
-                    if len(self._queue) < self.max_in_flight and (
-                        not self._queue or self._bytes_in_flight < self.pipeline_bytes
-                    ):
+            for name, build in items:
+                frame0 = build(0)
+                if not self._fits(len(frame0)):
+                    self._flush(batch)
+                    try:
+                        await self._wait_for_room(len(frame0), deadline)
+                    except TimeoutError:
                         break
-                    self._slot.clear()
-                    await self._slot.wait()
-                msg_id = self._alloc_id()
-                frame = build(msg_id)
-                pending = _Pending(msg_id, name, len(frame), loop.create_future())
-                self._queue.append(pending)
-                self._by_id[msg_id] = pending
-                self._bytes_in_flight += pending.size
-                assert self._transport is not None
-                pending.sent_at = time.perf_counter()
-                self._last_activity = time.monotonic()
-                self._transport.write(frame)
-                return await asyncio.shield(pending.future)
-        except TimeoutError:
-            raise KvpTimeoutError(
-                f"no reply for {name!r} from {self.endpoint} within {timeout:g} s"
-            ) from None
+                else:
+                    self._check_open()
+                pending, frame = self._register(name, frame0, loop)
+                pendings.append(pending)
+                batch.append(frame)
+            self._flush(batch)
+            for p in pendings:
+                try:
+                    results.append(await p.future)
+                except KvpTimeoutError as exc:
+                    results.append(exc)
+        except asyncio.CancelledError:
+            for p in pendings:
+                p.abandoned = True
+            raise
         finally:
-            # Mark an unanswered request abandoned so its late reply is discarded.
-            if pending is not None and not pending.future.done():
-                pending.abandoned = True
+            timer.cancel()
+        for name, _ in items[len(pendings) :]:
+            results.append(
+                KvpTimeoutError(f"no room to send {name!r} to {self.endpoint} within {timeout:g} s")
+            )
+        return results
+
+    def _flush(self, batch: list[bytes]) -> None:
+        if not batch:
+            return
+        assert self._transport is not None
+        now = time.perf_counter()
+        for p in self._queue:
+            if not p.sent_at:
+                p.sent_at = now
+        self._last_activity = time.monotonic()
+        self._transport.write(batch[0] if len(batch) == 1 else b"".join(batch))
+        batch.clear()
 
     def _check_open(self) -> None:
         if self._closed_exc is not None:

@@ -265,3 +265,30 @@ async def test_keepalive_falls_back_to_a_cheap_read_on_old_proxies() -> None:
         await asyncio.sleep(0.4)
         assert kvp.connected
     assert seen[0] == "PING" and "$OV_PRO" in seen and seen.count("PING") == 1
+
+
+async def test_pipelining_never_exceeds_the_proxy_read_buffer() -> None:
+    # KVP reads at most 2048 bytes per socket event and cannot reassemble a request cut there.
+    # The client bounds unanswered bytes, so no single server read can exceed 2048 bytes.
+    sizes: list[int] = []
+
+    async def serve(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        dec = RequestDecoder()
+        while data := await reader.read(65536):
+            sizes.append(len(data))
+            await asyncio.sleep(0.002)  # a slow proxy lets requests pile up
+            for req in dec.feed_requests(data):
+                writer.write(answer(req))
+        writer.close()
+
+    server = await asyncio.start_server(serve, "127.0.0.1", 0)
+    port = server.sockets[0].getsockname()[1]
+    try:
+        async with Client(port=port) as kvp:
+            names = [f"MYE6ARRAY[{i}]" for i in range(1, 401)]
+            res = await kvp.read_many(names)
+            assert [r.text for r in res.values()] == [f"v:{n}" for n in names]
+    finally:
+        server.close()
+    assert max(sizes) <= 2048
+    assert len(sizes) < 400  # requests were coalesced, not sent one segment each
