@@ -1,1 +1,62 @@
-"""placeholder"""
+"""A faithful KUKAVARPROXY 9.0 emulator: the KRC4 side of the protocol, for tests and demos.
+
+``kukavarproxy-emu --port 0`` on the command line, or in process::
+
+    async with Emulator(EmulatorConfig(port=0)) as emu:
+        ...  # connect to emu.host, emu.port
+
+See docs/emulator.md for the behaviours, latency profiles and fault injection.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .config import EmulatorConfig
+    from .faults import Fault, FaultSet
+    from .handler import Responder, build_store
+    from .latency import PROFILES, LatencyProfile, ServiceTime
+    from .server import ConnectionInfo, Emulator, Stats
+    from .threaded import EmulatorThread
+
+# Imported on first use, so `import kukavarproxy_emu.datfile` (or the store) does not pull in
+# asyncio and the server.
+_LAZY = {
+    "EmulatorConfig": "config",
+    "Fault": "faults",
+    "FaultSet": "faults",
+    "PROFILES": "latency",
+    "LatencyProfile": "latency",
+    "ServiceTime": "latency",
+    "ConnectionInfo": "server",
+    "Emulator": "server",
+    "EmulatorThread": "threaded",
+    "Responder": "handler",
+    "Stats": "server",
+    "build_store": "handler",
+}
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(f".{module}", __name__), name)
+
+
+__all__ = [
+    "PROFILES",
+    "ConnectionInfo",
+    "Emulator",
+    "EmulatorConfig",
+    "EmulatorThread",
+    "Fault",
+    "FaultSet",
+    "LatencyProfile",
+    "Responder",
+    "ServiceTime",
+    "Stats",
+    "build_store",
+]

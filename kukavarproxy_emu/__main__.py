@@ -1,0 +1,153 @@
+"""Command line of the emulator: ``kukavarproxy-emu`` / ``python -m kukavarproxy_emu``.
+
+Plain argparse so the emulator needs nothing beyond the standard library (and numpy through
+the store). The first line on stdout, flushed, is ``listening on HOST:PORT`` with the real
+port, so scripts can start it with ``--port 0`` and read where it went. SIGINT and SIGTERM stop
+it cleanly with exit status 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import signal
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from .config import DEFAULT_PORT, DEFAULT_UDP_PORT, KNOWN_QUIRKS, EmulatorConfig
+from .faults import Fault
+from .latency import PROFILES
+from .server import Emulator
+
+__all__ = ["build_parser", "config_from_args", "main"]
+
+log = logging.getLogger("kukavarproxy_emu")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="kukavarproxy-emu",
+        description="KUKAVARPROXY 9.0 emulator (TCP 7000 protocol, UDP 6999 discovery).",
+    )
+    net = parser.add_argument_group("network")
+    net.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    net.add_argument(
+        "--port", type=int, default=DEFAULT_PORT, help="TCP port (default 7000, 0 = ephemeral)"
+    )
+    net.add_argument("--max-clients", type=int, default=10, help="0 = unlimited (default 10)")
+    net.add_argument(
+        "--idle-timeout", type=float, default=30.0, help="seconds, 0 = never (default 30)"
+    )
+    net.add_argument("--udp-port", type=int, default=DEFAULT_UDP_PORT, help="discovery port")
+    net.add_argument(
+        "--udp-reply-port",
+        type=int,
+        default=DEFAULT_PORT,
+        help="port discovery answers go to (default 7000, 0 = the sender's port)",
+    )
+    disc = net.add_mutually_exclusive_group()
+    disc.add_argument("--discovery", dest="discovery", action="store_true", default=None)
+    disc.add_argument("--no-discovery", dest="discovery", action="store_false")
+
+    beh = parser.add_argument_group("behaviour")
+    beh.add_argument(
+        "--config",
+        action="append",
+        default=[],
+        metavar="FILE",
+        type=Path,
+        help="$CONFIG.DAT-style file whose globals are added to the defaults (repeatable)",
+    )
+    beh.add_argument(
+        "--latency",
+        default="none",
+        metavar="PROFILE",
+        help=f"none | {' | '.join(PROFILES)} | fixed:SECONDS (default none)",
+    )
+    beh.add_argument("--seed", type=int, default=None, help="seed of the latency sampler")
+    beh.add_argument(
+        "--strict", action="store_true", help="C3 Bridge style failures (tail 00 00 00)"
+    )
+    beh.add_argument(
+        "--quirks",
+        action="append",
+        default=[],
+        metavar="QUIRK[,QUIRK]",
+        help=f"reproduce old-proxy bugs: {', '.join(sorted(KNOWN_QUIRKS))}",
+    )
+    beh.add_argument(
+        "--fault",
+        action="append",
+        default=[],
+        metavar="SPEC",
+        help="inject a fault, KIND[:VALUE][@NTH][,conn=C][,count=K][,pause=S] (repeatable)",
+    )
+    parser.add_argument(
+        "--log-level",
+        default="warning",
+        choices=["debug", "info", "warning", "error"],
+        help="logging level on stderr (default warning)",
+    )
+    return parser
+
+
+def config_from_args(args: argparse.Namespace) -> EmulatorConfig:
+    quirks = frozenset(q.strip() for item in args.quirks for q in item.split(",") if q.strip())
+    return EmulatorConfig(
+        host=args.host,
+        port=args.port,
+        config_files=tuple(args.config),
+        latency=args.latency,
+        max_clients=args.max_clients,
+        idle_timeout=args.idle_timeout,
+        seed=args.seed,
+        strict=args.strict,
+        quirks=quirks,
+        udp_port=args.udp_port,
+        udp_reply_port=args.udp_reply_port,
+        discovery=args.discovery,
+        faults=tuple(Fault.parse(spec) for spec in args.fault),
+    )
+
+
+async def serve(config: EmulatorConfig) -> None:
+    """Run until SIGINT/SIGTERM."""
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        try:
+            loop.add_signal_handler(sig, stop.set)
+        except (NotImplementedError, RuntimeError):  # Windows: Ctrl-C raises KeyboardInterrupt
+            pass
+    async with Emulator(config) as emu:
+        print(f"listening on {emu.host}:{emu.port}", flush=True)
+        await stop.wait()
+        log.info("stopping (%d requests served)", emu.stats.requests)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=args.log_level.upper(),
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+        stream=sys.stderr,
+    )
+    try:
+        config = config_from_args(args)
+    except (ValueError, OSError) as exc:
+        parser.error(str(exc))
+    try:
+        asyncio.run(serve(config))
+    except KeyboardInterrupt:
+        pass
+    except (OSError, ValueError) as exc:  # port in use, bad address, bad --config file
+        log.error("%s", exc)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,84 @@
+"""Configuration of one emulator instance: every command-line option as a dataclass field.
+
+:class:`EmulatorConfig` is what both the CLI (``kukavarproxy_emu.__main__``) and the
+in-process API (:class:`~kukavarproxy_emu.server.Emulator`) consume; the defaults are the
+behaviour of a KUKAVARPROXY 9.0 on TCP 7000, except that it listens on 127.0.0.1 only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from pyopenshowvar.protocol import MAX_FRAME
+
+from .faults import Fault
+from .latency import LatencyProfile, resolve_profile
+
+__all__ = ["DEFAULT_PORT", "KNOWN_QUIRKS", "EmulatorConfig"]
+
+DEFAULT_PORT = 7000
+DEFAULT_UDP_PORT = 6999
+#: ``legacy-ids``: pre-9.0 bug, every reply to one TCP read carries the first request's id.
+#: ``no-ping``: pre-9.0 proxies pass ``PING`` to CrossComm, so it reads as an unknown variable.
+KNOWN_QUIRKS = frozenset({"legacy-ids", "no-ping"})
+
+
+@dataclass(frozen=True)
+class EmulatorConfig:
+    """All options of one emulator; see docs/emulator.md for the behaviour behind each."""
+
+    host: str = "127.0.0.1"
+    #: TCP port; 0 picks a free ephemeral port (read it back from ``Emulator.port``).
+    port: int = DEFAULT_PORT
+    #: $CONFIG.DAT-style files whose globals are added to the default ones.
+    config_files: tuple[Path, ...] = ()
+    #: The same, as text (for tests).
+    dat_text: str | None = None
+    #: "none", "kvp", "thesis", "fixed:SECONDS" or a LatencyProfile.
+    latency: str | LatencyProfile = "none"
+    #: Clients beyond this are accepted and closed at once (KVP: 10); 0 = unlimited.
+    max_clients: int = 10
+    #: Seconds without received data before a client is dropped (KVP 9.0: 30); 0 = never.
+    idle_timeout: float = 30.0
+    #: Seed of the latency sampler (None: a fresh seed each run).
+    seed: int | None = None
+    #: C3 Bridge style failures (tail 00 00 00, empty value) for unknown reads and refused writes.
+    strict: bool = False
+    quirks: frozenset[str] = frozenset()
+    #: UDP discovery: listen port, the port answers go to (0: the sender's port) and the switch
+    #: (None: on unless the TCP port is ephemeral).
+    udp_port: int = DEFAULT_UDP_PORT
+    udp_reply_port: int = DEFAULT_PORT
+    discovery: bool | None = None
+    faults: tuple[Fault, ...] = ()
+    #: Largest request frame accepted; a longer length field closes the connection.
+    max_frame: int = MAX_FRAME
+    #: Requests queued but not yet answered per connection before the socket stops being read.
+    max_pending: int = 128
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.port <= 0xFFFF or not 0 <= self.udp_port <= 0xFFFF:
+            raise ValueError("ports must be in 0..65535")
+        if not 0 <= self.udp_reply_port <= 0xFFFF:
+            raise ValueError("udp_reply_port must be in 0..65535")
+        if self.max_clients < 0 or self.idle_timeout < 0:
+            raise ValueError("max_clients and idle_timeout must be >= 0")
+        if self.max_pending < 1 or self.max_frame < 8:
+            raise ValueError("max_pending must be >= 1 and max_frame >= 8")
+        unknown = set(self.quirks) - KNOWN_QUIRKS
+        if unknown:
+            raise ValueError(f"unknown quirks {sorted(unknown)} (known: {sorted(KNOWN_QUIRKS)})")
+        object.__setattr__(self, "quirks", frozenset(self.quirks))
+        object.__setattr__(self, "config_files", tuple(Path(p) for p in self.config_files))
+        resolve_profile(self.latency)  # fail early on a bad profile name
+
+    @property
+    def latency_profile(self) -> LatencyProfile | None:
+        return resolve_profile(self.latency)
+
+    @property
+    def discovery_enabled(self) -> bool:
+        if self.discovery is None:
+            return self.port != 0
+        return self.discovery

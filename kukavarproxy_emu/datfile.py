@@ -1,0 +1,423 @@
+"""Parser for KRL data lists (``$CONFIG.DAT`` and module ``.DAT`` files).
+
+This is the one place that understands KRL declaration syntax; the variable store loads the
+emulator's globals with it and the KRL interpreter will reuse it for module data lists. It is
+purely syntactic: initial values stay KRL literal text (``={A1 0.0, A2 -90.0}``, ``=#T1``,
+``="text"``) and are handed to :func:`pyopenshowvar.krl.parse_value` by whoever knows the types,
+so this module does not depend on the type registry at all.
+
+Accepted lines (keywords are case-insensitive, names are returned upper-case because KRL names
+are case-insensitive)::
+
+    &ACCESS RVP                          header lines: ignored
+    DEFDAT $CONFIG PUBLIC                optional wrapper ... ENDDAT
+    ;FOLD USER GLOBALS ... ;ENDFOLD      comments and folds: ignored
+    EXT BAS(BAS_COMMAND:IN, REAL:IN)     EXT/EXTFCT/EXTP/EXTFCTP: ignored
+    DECL GLOBAL E6AXIS HOME={A1 0.0, ...}
+    DECL INT A, B=2, C[10]               several names, arrays, initialisers
+    INT COUNT=0                          DECL may be omitted
+    DECL CONST INT MAXN=10               constants (the store makes them read-only)
+    OUTPUT_VARS[3]=TRUE                  element initialisation after the declaration
+    NAME[]="hello"                       whole CHAR array initialisation
+    GLOBAL STRUC MYTYPE REAL X, Y, INT N, E6AXIS AX
+    GLOBAL ENUM COLORS RED, GREEN, BLUE
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+__all__ = [
+    "Assignment",
+    "DatFile",
+    "DatSyntaxError",
+    "Declaration",
+    "EnumDecl",
+    "StrucDecl",
+    "default_config_text",
+    "load_default_config",
+    "parse_dat",
+    "read_dat",
+]
+
+_IDENT = re.compile(r"[A-Za-z_$][A-Za-z0-9_$]*")
+_INT = re.compile(r"[+-]?[0-9]+")
+# Statements that declare procedures/functions of other modules: nothing for a data store.
+_IGNORED_KEYWORDS = frozenset({"EXT", "EXTFCT", "EXTP", "EXTFCTP", "IMPORT"})
+# Words that can never be a variable name in a declaration; catching them gives better errors.
+_RESERVED = frozenset(
+    {"DECL", "GLOBAL", "CONST", "STRUC", "ENUM", "DEFDAT", "ENDDAT", "PUBLIC", *_IGNORED_KEYWORDS}
+)
+
+
+class DatSyntaxError(ValueError):
+    """A line of a data list that is not valid declaration syntax.
+
+    The message names file, line and column and quotes the offending text, so the error can be
+    shown to the user as is.
+    """
+
+    def __init__(self, message: str, *, filename: str, line: int, column: int, text: str) -> None:
+        super().__init__(f"{filename}:{line}:{column}: {message}: {text.strip()!r}")
+        self.reason = message
+        self.filename = filename
+        self.line = line
+        self.column = column
+        self.text = text
+
+
+@dataclass(frozen=True, slots=True)
+class Declaration:
+    """One declared variable; ``init`` is the literal text after ``=`` (``None``: no value).
+
+    For a CHAR array ``CHAR NAME[20]`` the type is ``"CHAR"`` and ``dims`` is ``(20,)``.
+    """
+
+    name: str
+    type_name: str
+    dims: tuple[int, ...]
+    init: str | None
+    is_global: bool
+    is_const: bool
+    line: int
+
+
+@dataclass(frozen=True, slots=True)
+class Assignment:
+    """An initialisation line such as ``OUTPUT_VARS[3]=TRUE`` or ``NAME[]="hi"``.
+
+    ``target`` is the normalised left-hand side (upper-case, no blanks), i.e. a name the
+    variable store understands.
+    """
+
+    target: str
+    value: str
+    line: int
+
+
+@dataclass(frozen=True, slots=True)
+class StrucDecl:
+    """A user structure type. Member types are KRL type names; text members are ``CHAR[n]``."""
+
+    name: str
+    members: tuple[tuple[str, str], ...]
+    is_global: bool
+    line: int
+
+
+@dataclass(frozen=True, slots=True)
+class EnumDecl:
+    """A user enumeration type with its values in declaration order (without ``#``)."""
+
+    name: str
+    values: tuple[str, ...]
+    is_global: bool
+    line: int
+
+
+@dataclass(frozen=True, slots=True)
+class DatFile:
+    """Everything a data list declares, in source order within each kind."""
+
+    filename: str
+    name: str | None
+    public: bool
+    declarations: tuple[Declaration, ...]
+    assignments: tuple[Assignment, ...]
+    structs: tuple[StrucDecl, ...]
+    enums: tuple[EnumDecl, ...]
+
+
+class _Line:
+    """A cursor over one source line; every error it raises points at the current column."""
+
+    def __init__(self, text: str, lineno: int, filename: str, end: int) -> None:
+        self.text = text
+        self.lineno = lineno
+        self.filename = filename
+        self.pos = 0
+        self.end = end  # where the comment starts: the statement ends there
+
+    def error(self, message: str, pos: int | None = None) -> DatSyntaxError:
+        column = (self.pos if pos is None else pos) + 1
+        return DatSyntaxError(
+            message, filename=self.filename, line=self.lineno, column=column, text=self.text
+        )
+
+    def skip_ws(self) -> None:
+        while self.pos < self.end and self.text[self.pos] in " \t\f\v\r":
+            self.pos += 1
+
+    def mark(self) -> int:
+        """The position of the next token (for error columns)."""
+        self.skip_ws()
+        return self.pos
+
+    def at_end(self) -> bool:
+        self.skip_ws()
+        return self.pos >= self.end
+
+    def peek(self) -> str:
+        self.skip_ws()
+        return self.text[self.pos] if self.pos < self.end else ""
+
+    def accept(self, char: str) -> bool:
+        if self.peek() == char:
+            self.pos += 1
+            return True
+        return False
+
+    def expect(self, char: str, what: str) -> None:
+        if not self.accept(char):
+            raise self.error(f"expected {what}")
+
+    def ident(self, what: str = "a name") -> str:
+        self.skip_ws()
+        match = _IDENT.match(self.text, self.pos, self.end)
+        if match is None:
+            raise self.error(f"expected {what}")
+        self.pos = match.end()
+        return match.group().upper()
+
+    def peek_ident(self) -> str | None:
+        self.skip_ws()
+        match = _IDENT.match(self.text, self.pos, self.end)
+        return match.group().upper() if match else None
+
+    def integer(self, what: str) -> int:
+        self.skip_ws()
+        match = _INT.match(self.text, self.pos, self.end)
+        if match is None:
+            raise self.error(f"expected {what}")
+        self.pos = match.end()
+        return int(match.group())
+
+    def value_text(self, *, stop_at_comma: bool) -> str:
+        """Literal text up to a top-level comma (or the end), skipping nested braces and strings."""
+        self.skip_ws()
+        start, depth, pos = self.pos, 0, self.pos
+        while pos < self.end:
+            char = self.text[pos]
+            if char == '"':
+                close = self.text.find('"', pos + 1, self.end)
+                if close < 0:
+                    raise self.error("unterminated string", pos)
+                pos = close
+            elif char == "{":
+                depth += 1
+            elif char == "}":
+                depth -= 1
+                if depth < 0:
+                    raise self.error("unbalanced '}'", pos)
+            elif char == "," and depth == 0 and stop_at_comma:
+                break
+            pos += 1
+        if depth:
+            raise self.error("unbalanced '{'", start)
+        self.pos = pos
+        text = self.text[start:pos].strip()
+        if not text:
+            raise self.error("expected a value after '='")
+        return text
+
+
+def _comment_start(text: str) -> int:
+    """Index of the ``;`` that starts the comment, ignoring ``;`` inside string literals."""
+    in_string = False
+    for index, char in enumerate(text):
+        if char == '"':
+            in_string = not in_string
+        elif char == ";" and not in_string:
+            return index
+    return len(text)
+
+
+class _Parser:
+    def __init__(self, filename: str) -> None:
+        self.filename = filename
+        self.name: str | None = None
+        self.public = False
+        self.ended = False
+        self.declarations: list[Declaration] = []
+        self.assignments: list[Assignment] = []
+        self.structs: list[StrucDecl] = []
+        self.enums: list[EnumDecl] = []
+
+    def statement(self, line: _Line) -> None:
+        if self.ended:
+            raise line.error("text after ENDDAT")
+        start = line.pos
+        word = line.ident("a declaration")
+        if word == "DEFDAT":
+            if self.name is not None or self.declarations or self.assignments:
+                raise line.error("DEFDAT must be the first statement", start)
+            self.name = line.ident("the data list name")
+            if not line.at_end():
+                if line.ident("PUBLIC or the end of the line") != "PUBLIC":
+                    raise line.error("expected PUBLIC", line.pos)
+                self.public = True
+        elif word == "ENDDAT":
+            self.ended = True
+        elif word in _IGNORED_KEYWORDS:
+            return
+        else:
+            self._declaration(line, word, start)
+        if not line.at_end():
+            raise line.error("unexpected text")
+
+    def _declaration(self, line: _Line, word: str, start: int) -> None:
+        is_global = is_const = has_decl = False
+        # The modifiers may come in either order (KSS accepts "GLOBAL DECL" and "DECL GLOBAL").
+        while word in ("GLOBAL", "DECL", "CONST"):
+            is_global |= word == "GLOBAL"
+            is_const |= word == "CONST"
+            has_decl |= word == "DECL"
+            word = line.ident("a type name")
+        if word == "STRUC":
+            self.structs.append(self._struc(line, is_global))
+        elif word == "ENUM":
+            self.enums.append(self._enum(line, is_global))
+        elif has_decl or is_global or is_const or line.peek_ident() is not None:
+            # "TYPE NAME" without DECL is an implicit declaration; KRL allows it.
+            self._decl_items(line, word, is_global, is_const)
+        else:
+            self._assignment(line, word, start)
+
+    def _decl_items(self, line: _Line, type_name: str, is_global: bool, is_const: bool) -> None:
+        if type_name in _RESERVED:
+            raise line.error("expected a type name", line.pos - len(type_name))
+        while True:
+            name_pos = line.mark()
+            name = line.ident("a variable name")
+            if name in _RESERVED:
+                raise line.error("expected a variable name", name_pos)
+            dims: tuple[int, ...] = ()
+            if line.accept("["):
+                dims = self._dims(line)
+            init = line.value_text(stop_at_comma=True) if line.accept("=") else None
+            self.declarations.append(
+                Declaration(name, type_name, dims, init, is_global, is_const, line.lineno)
+            )
+            if not line.accept(","):
+                return
+
+    def _dims(self, line: _Line) -> tuple[int, ...]:
+        dims = []
+        while True:
+            size_pos = line.mark()
+            size = line.integer("an array size")
+            if size < 1:
+                raise line.error("array size must be positive", size_pos)
+            dims.append(size)
+            if line.accept("]"):
+                return tuple(dims)
+            line.expect(",", "',' or ']'")
+
+    def _assignment(self, line: _Line, name: str, start: int) -> None:
+        target = name
+        if line.accept("["):
+            if line.accept("]"):
+                target += "[]"
+            else:
+                indices = [str(line.integer("an index"))]
+                while not line.accept("]"):
+                    line.expect(",", "',' or ']'")
+                    indices.append(str(line.integer("an index")))
+                target += "[" + ",".join(indices) + "]"
+        while line.accept("."):
+            target += "." + line.ident("a member name")
+        if not line.accept("="):
+            raise line.error("expected a declaration or an assignment", start)
+        value = line.value_text(stop_at_comma=False)
+        self.assignments.append(Assignment(target, value, line.lineno))
+
+    def _struc(self, line: _Line, is_global: bool) -> StrucDecl:
+        name = line.ident("the structure name")
+        members: list[tuple[str, str]] = []
+        seen: set[str] = set()
+        member_type = line.ident("a member type")
+        while True:
+            member_pos = line.mark()
+            member = line.ident("a member name")
+            member_type_here = member_type
+            if line.accept("["):
+                # Only CHAR arrays (text) are usual in structures.
+                dims = self._dims(line)
+                if member_type != "CHAR" or len(dims) != 1:
+                    raise line.error("only 1-D CHAR arrays are supported as members", member_pos)
+                member_type_here = f"CHAR[{dims[0]}]"
+            if member in seen:
+                raise line.error(f"duplicate member {member}", member_pos)
+            seen.add(member)
+            members.append((member, member_type_here))
+            if line.at_end():
+                return StrucDecl(name, tuple(members), is_global, line.lineno)
+            line.expect(",", "',' between members")
+            # "REAL X, Y, INT N": a second word before the next comma starts a new type.
+            save = line.pos
+            first = line.ident("a member name")
+            if line.peek_ident() is not None:
+                member_type = first
+            else:
+                line.pos = save
+
+    def _enum(self, line: _Line, is_global: bool) -> EnumDecl:
+        name = line.ident("the enumeration name")
+        values: list[str] = []
+        while True:
+            value_pos = line.mark()
+            value = line.ident("an enumeration value")
+            if value in values:
+                raise line.error(f"duplicate enumeration value {value}", value_pos)
+            values.append(value)
+            if not line.accept(","):
+                return EnumDecl(name, tuple(values), is_global, line.lineno)
+
+    def result(self) -> DatFile:
+        return DatFile(
+            filename=self.filename,
+            name=self.name,
+            public=self.public,
+            declarations=tuple(self.declarations),
+            assignments=tuple(self.assignments),
+            structs=tuple(self.structs),
+            enums=tuple(self.enums),
+        )
+
+
+def parse_dat(text: str, filename: str = "<dat>") -> DatFile:
+    """Parse the text of a data list; raises :class:`DatSyntaxError` on the first bad line."""
+    parser = _Parser(filename)
+    for lineno, raw in enumerate(text.splitlines(), start=1):
+        stripped = raw.lstrip()
+        # "&ACCESS RVP", "&REL 1", "&PARAM ..." are editor metadata, not KRL.
+        if not stripped or stripped.startswith("&"):
+            continue
+        line = _Line(raw, lineno, filename, _comment_start(raw))
+        if line.at_end():
+            continue
+        parser.statement(line)
+    if parser.name is not None and not parser.ended:
+        raise DatSyntaxError(
+            "missing ENDDAT", filename=filename, line=len(text.splitlines()), column=1, text=""
+        )
+    return parser.result()
+
+
+def read_dat(path: str | Path, encoding: str = "latin-1") -> DatFile:
+    """Read and parse a data list file; KRC files are Windows-1252/latin-1, not UTF-8."""
+    path = Path(path)
+    return parse_dat(path.read_text(encoding=encoding), filename=str(path))
+
+
+def default_config_text() -> str:
+    """The text of the emulator's bundled ``default_config.dat``."""
+    return resources.files(__package__).joinpath("default_config.dat").read_text(encoding="utf-8")
+
+
+def load_default_config() -> DatFile:
+    """The parsed bundled ``default_config.dat`` (the globals the thesis programs use)."""
+    return parse_dat(default_config_text(), filename="default_config.dat")

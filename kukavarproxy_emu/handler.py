@@ -1,0 +1,146 @@
+"""Request → reply logic of the emulator with KUKAVARPROXY 9.0 semantics, no I/O.
+
+:class:`Responder` answers one decoded request from the variable store exactly as KVP 9.0 does
+(reference §2.4, §4.1): unknown reads give an empty value with success status, refused writes
+echo the value with a failure status, ``PING`` answers ``PONG``, modes 2/3 pack 16-bit words.
+``strict`` switches the failures to C3 Bridge's ``00 00 00`` tail. Kept apart from the sockets
+so it can be tested and reused (the KRL interpreter's tests drive it directly).
+"""
+
+from __future__ import annotations
+
+import logging
+import struct
+
+from pyopenshowvar.protocol import ENCODING, Mode, Reply, Request
+
+from .config import EmulatorConfig
+from .latency import Kind
+from .store import UnknownVariable, VariableStore, WriteRefused
+
+__all__ = ["Responder", "build_store"]
+
+log = logging.getLogger(__name__)
+
+_U16 = struct.Struct(">H")
+#: A reply's value must leave room for the 6 other content bytes under the 16-bit length.
+_MAX_VALUE = 0xFFFF - 6
+#: C3 Bridge's failure tail is error code 0 + flag 0; KVP's is the block length 1 + flag 0.
+_STRICT_CODE = b"\x00\x00"
+
+
+def _to_word(token: str) -> int:
+    """VB's ``CLng`` then the proxy's ``longToWord``: round half to even, keep 16 bits."""
+    try:
+        value = int(token)
+    except ValueError:
+        value = round(float(token))  # ValueError / OverflowError for non-numbers
+    return value & 0xFFFF
+
+
+def build_store(config: EmulatorConfig) -> VariableStore:
+    """The default KRC4 variables plus the globals of ``config.config_files`` and ``dat_text``."""
+    store = VariableStore()
+    for path in config.config_files:
+        store.load_dat(path.read_text(encoding="latin-1"))
+    if config.dat_text:
+        store.load_dat(config.dat_text)
+    return store
+
+
+class Responder:
+    """Answers one request the way KUKAVARPROXY 9.0 does (``strict``: C3 Bridge failures)."""
+
+    def __init__(self, store: VariableStore, *, strict: bool = False, ping: bool = True) -> None:
+        self.store = store
+        self.strict = strict
+        self.ping = ping
+
+    def kind(self, request: Request) -> Kind | None:
+        """What the request costs the controller: None for PING and unknown modes (no CrossComm)."""
+        if request.mode in (Mode.READ, Mode.READ_ARRAY):
+            return None if self.ping and request.name == "PING" else "read"
+        if request.mode in (Mode.WRITE, Mode.WRITE_ARRAY):
+            return "write"
+        return None
+
+    def answer(self, request: Request, msg_id: int) -> Reply:
+        mode = request.mode
+        if mode == Mode.READ:
+            text = self._lookup(request.name)
+            if text is None:
+                # KVP 9.0 reports an unknown variable as an empty value with *success* status.
+                return self._failure(msg_id, mode) if self.strict else Reply(msg_id, mode, b"")
+            return self._reply(msg_id, mode, text.encode(ENCODING, errors="replace"))
+        if mode == Mode.WRITE:
+            value = request.value or b""
+            if self._write(request.name, value.decode(ENCODING)):
+                return self._reply(msg_id, mode, value)  # an echo, not a read-back
+            return self._failure(msg_id, mode, value)
+        if mode == Mode.READ_ARRAY:
+            return self._read_array(request.name, msg_id)
+        if mode == Mode.WRITE_ARRAY:
+            return self._write_array(request, msg_id)
+        return Reply(msg_id, None, b"", 0, b"")  # KVP: bare "id 00 00" for an unknown mode
+
+    def _reply(self, msg_id: int, mode: int, value: bytes) -> Reply:
+        if len(value) > _MAX_VALUE:
+            log.warning("value of %d bytes does not fit a reply; answering failure", len(value))
+            return self._failure(msg_id, mode)
+        return Reply(msg_id, mode, value)
+
+    def _failure(self, msg_id: int, mode: int, value: bytes = b"") -> Reply:
+        if self.strict:
+            return Reply(msg_id, mode, b"", 0, _STRICT_CODE)
+        return Reply(msg_id, mode, value if len(value) <= _MAX_VALUE else b"", 0)
+
+    def _lookup(self, name: str) -> str | None:
+        if self.ping and name == "PING":  # exact and case-sensitive, as in KVP 9.0
+            return "PONG"
+        try:
+            return self.store.read(name)
+        except UnknownVariable:
+            return None
+        except Exception:  # a store bug must cost one reply, not the connection
+            log.warning("store.read(%r) failed", name, exc_info=True)
+            return None
+
+    def _write(self, name: str, text: str) -> bool:
+        try:
+            self.store.write(name, text)
+        except (WriteRefused, UnknownVariable) as exc:
+            log.debug("write %s=%r refused: %s", name, text, exc)
+            return False
+        except Exception:
+            log.warning("store.write(%r, %r) failed", name, text, exc_info=True)
+            return False
+        return True
+
+    def _read_array(self, name: str, msg_id: int) -> Reply:
+        text = self._lookup(name)
+        if text is None:
+            if self.strict:
+                return self._failure(msg_id, Mode.READ_ARRAY)
+            text = ""
+        tokens = text.split()
+        if len(tokens) < 2:  # KVP's `If UBound(...) > 0` skips one-token values
+            return Reply(msg_id, Mode.READ_ARRAY, b"")
+        try:
+            words = b"".join(_U16.pack(_to_word(t)) for t in tokens)
+        except (ValueError, OverflowError):
+            # KVP raises a VB error here and sends nothing; a failure reply is kinder.
+            return self._failure(msg_id, Mode.READ_ARRAY)
+        return self._reply(msg_id, Mode.READ_ARRAY, words)
+
+    def _write_array(self, request: Request, msg_id: int) -> Reply:
+        payload = request.value or b""
+        if not payload or len(payload) % 2:
+            return self._failure(msg_id, Mode.WRITE_ARRAY)
+        base = request.name.removesuffix("[]")
+        ok = False
+        for index, (word,) in enumerate(_U16.iter_unpack(payload), start=1):
+            # Only the last element's status survives, as in KVP.
+            ok = self._write(f"{base}[{index}]", str(word))
+        if ok:
+            return Reply(msg_id, Mode.WRITE_ARRAY, b"")
+        return self._failure(msg_id, Mode.WRITE_ARRAY)

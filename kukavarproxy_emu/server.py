@@ -1,0 +1,442 @@
+"""The KUKAVARPROXY 9.0 emulator server: asyncio TCP on port 7000, UDP discovery, idle timer.
+
+Layers, top down:
+
+* :class:`Emulator` — ``async with Emulator(config) as emu`` owns the listening socket, the
+  variable store, the armed faults, the latency worker, the idle timer and the statistics;
+* ``_Connection`` — one :class:`asyncio.BufferedProtocol` per client: reads at most
+  ``READ_SIZE`` bytes at a time into its own buffer, reassembles frames with
+  :class:`~pyopenshowvar.protocol.RequestDecoder` and answers them in order;
+* :class:`~kukavarproxy_emu.handler.Responder` — pure request → :class:`~pyopenshowvar.protocol.Reply` logic with KVP 9.0
+  semantics (reference §2.4, §4.1), no I/O.
+
+Each connection has two paths. The fast path (no latency, no armed faults, nothing queued)
+answers everything one TCP read delivered and sends all replies with one ``transport.write``.
+The queued path hands requests to a per-connection worker task that waits for the global
+:class:`~kukavarproxy_emu.latency.ServiceQueue` and applies faults; the socket stops being read
+while ``max_pending`` requests wait or while the client is not reading its replies, so one
+connection holds at most ``max_pending`` + one read's worth of requests.
+:class:`~kukavarproxy_emu.threaded.EmulatorThread` runs an Emulator in a daemon thread for synchronous code.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import random
+import socket
+import struct
+import time
+from collections import deque
+from dataclasses import dataclass
+from functools import partial
+from types import TracebackType
+from typing import Self
+
+from pyopenshowvar.errors import ProtocolError
+from pyopenshowvar.protocol import (
+    Request,
+    RequestDecoder,
+    decode_request,
+    encode_reply,
+)
+
+from .config import EmulatorConfig
+from .discovery import start_discovery
+from .faults import FaultSet, send_reply
+from .handler import Responder, build_store
+from .latency import ServiceQueue
+from .store import VariableStore
+
+__all__ = ["ConnectionInfo", "Emulator", "Stats"]
+
+log = logging.getLogger(__name__)
+
+_U16 = struct.Struct(">H")
+#: Bytes read from a socket per event: bounds the work (and replies) one read can queue.
+READ_SIZE = 32 * 1024
+#: (request, id the reply carries, request number on its connection); None = close here.
+_Item = tuple[Request, int, int] | None
+
+
+@dataclass
+class Stats:
+    """Counters of one emulator (plain ints: read them from the loop thread or accept a race)."""
+
+    #: Replies sent (including dropped-by-fault ones that were computed).
+    requests: int = 0
+    #: Clients connected now.
+    clients: int = 0
+    #: Connections served since start (not counting rejected ones).
+    connections: int = 0
+    #: Connections closed at once because max_clients were connected.
+    rejected: int = 0
+    protocol_errors: int = 0
+    idle_drops: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class ConnectionInfo:
+    """A snapshot of one connection, for tests and diagnostics."""
+
+    index: int
+    peer: str
+    received: int
+    #: Bytes of an incomplete request held by the decoder.
+    buffered: int
+    #: Requests decoded but not yet answered.
+    pending: int
+    #: Reply bytes the kernel has not accepted yet.
+    write_buffer: int
+    reading_paused: bool
+
+
+class _Connection(asyncio.BufferedProtocol):
+    """One client. Everything it sends is contained here: errors close only this connection."""
+
+    def __init__(self, emu: Emulator) -> None:
+        self.emu = emu
+        self.transport: asyncio.Transport | None = None
+        self.index = 0
+        self.peer = "?"
+        self.decoder = RequestDecoder(max_frame=emu.config.max_frame)
+        self.queue: deque[_Item] = deque()
+        self.worker: asyncio.Task[None] | None = None
+        self.received = 0
+        self.last_rx = time.monotonic()
+        self.closed = False
+        self._write_paused = False
+        self._reading_paused = False
+        self._drained: asyncio.Future[None] | None = None
+        self._rbuf = memoryview(bytearray(READ_SIZE))
+
+    # -- asyncio callbacks ----------------------------------------------------------------
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+        peer = transport.get_extra_info("peername")
+        self.peer = f"{peer[0]}:{peer[1]}" if peer else "?"
+        if not self.emu._admit(self):
+            # KVP accepts the 11th client and closes it in the Connect event: no bytes at all.
+            self.closed = True
+            transport.close()
+            return
+        sock = transport.get_extra_info("socket")
+        if sock is not None:
+            try:  # replies are small and latency-bound; never wait for Nagle
+                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            except OSError:
+                pass
+        log.info("client %d connected from %s", self.index, self.peer)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self.closed = True
+        if self.index:
+            self.emu._forget(self)
+            log.info("client %d (%s) disconnected", self.index, self.peer)
+        if self.worker is not None:
+            self.worker.cancel()
+
+    def get_buffer(self, sizehint: int) -> memoryview:
+        return self._rbuf
+
+    def buffer_updated(self, nbytes: int) -> None:
+        if self.closed:
+            return
+        self.last_rx = time.monotonic()
+        try:
+            frames = self.decoder.feed(self._rbuf[:nbytes])
+            if frames:
+                self._dispatch(frames)
+        except ProtocolError as exc:
+            self._protocol_error(exc)
+        except Exception:
+            log.exception("client %d (%s): internal error, closing", self.index, self.peer)
+            self.abort()
+
+    def eof_received(self) -> bool:
+        # A client that half-closes after its last request still gets every reply: keep the
+        # transport open until the worker has answered what is queued, then close.
+        if self.decoder.buffered:
+            log.info("client %d (%s): EOF inside a frame", self.index, self.peer)
+        if self.worker is not None:
+            self.queue.append(None)
+            return True
+        return False
+
+    def pause_writing(self) -> None:
+        self._write_paused = True
+        self._update_reading()
+
+    def resume_writing(self) -> None:
+        self._write_paused = False
+        if self._drained is not None and not self._drained.done():
+            self._drained.set_result(None)
+        self._update_reading()
+
+    # -- request handling -----------------------------------------------------------------
+
+    def _dispatch(self, frames: list[bytes]) -> None:
+        emu = self.emu
+        transport = self.transport
+        assert transport is not None
+        # Pre-9.0 bug: every reply to one TCP read carried the first request's id.
+        legacy_id = _U16.unpack_from(frames[0])[0] if emu.legacy_ids else None
+        if self.worker is None and not emu.slow:
+            answer = emu.responder.answer
+            out: list[bytes] = []
+            try:
+                for frame in frames:
+                    request = decode_request(frame)
+                    msg_id = request.msg_id if legacy_id is None else legacy_id
+                    out.append(encode_reply(answer(request, msg_id)))
+            finally:
+                # Answer the good requests before a bad one, then let the error close us.
+                if out:
+                    self.received += len(out)
+                    emu.stats.requests += len(out)
+                    transport.write(b"".join(out))
+            return
+        for frame in frames:
+            try:
+                request = decode_request(frame)
+            except ProtocolError as exc:
+                self.queue.append(None)  # answer what came before, then close
+                self.closed = True
+                emu.stats.protocol_errors += 1
+                log.warning("client %d (%s): %s; closing", self.index, self.peer, exc)
+                break
+            self.received += 1
+            msg_id = request.msg_id if legacy_id is None else legacy_id
+            self.queue.append((request, msg_id, self.received))
+        self._update_reading()
+        if self.worker is None:
+            self.worker = asyncio.get_running_loop().create_task(self._work())
+
+    async def _work(self) -> None:
+        emu = self.emu
+        transport = self.transport
+        assert transport is not None
+        try:
+            while self.queue:
+                item = self.queue.popleft()
+                self._update_reading()
+                if item is None:
+                    transport.close()
+                    return
+                request, msg_id, nth = item
+                kind = emu.responder.kind(request)
+                if emu.service is not None and kind is not None:
+                    compute = partial(emu.responder.answer, request, msg_id)
+                    reply = await emu.service.run(kind, compute)
+                else:
+                    reply = emu.responder.answer(request, msg_id)
+                frame = encode_reply(reply)
+                emu.stats.requests += 1
+                faults = emu.faults.match(self.index, nth) if emu.faults else []
+                if faults:
+                    if not await send_reply(transport, frame, faults):
+                        return
+                elif not transport.is_closing():
+                    transport.write(frame)
+                if self._write_paused:
+                    self._drained = asyncio.get_running_loop().create_future()
+                    await self._drained
+        except asyncio.CancelledError:
+            raise
+        except Exception:
+            log.exception("client %d (%s): internal error, closing", self.index, self.peer)
+            transport.abort()
+        finally:
+            self.worker = None
+
+    def _update_reading(self) -> None:
+        """Stop reading the socket while replies pile up: bounded memory per connection."""
+        transport = self.transport
+        if transport is None or transport.is_closing():
+            return
+        pause = self._write_paused or len(self.queue) >= self.emu.config.max_pending
+        if pause != self._reading_paused:
+            self._reading_paused = pause
+            if pause:
+                transport.pause_reading()
+            else:
+                transport.resume_reading()
+
+    def _protocol_error(self, exc: ProtocolError) -> None:
+        self.emu.stats.protocol_errors += 1
+        log.warning("client %d (%s): %s; closing", self.index, self.peer, exc)
+        self.close()
+
+    def close(self) -> None:
+        self.closed = True
+        if self.transport is None:
+            return
+        if self.worker is None:
+            self.transport.close()
+        elif self._write_paused:
+            self.transport.abort()  # the worker waits for a reader that is not reading
+        else:
+            self.queue.append(None)  # the worker closes after the replies already queued
+
+    def abort(self) -> None:
+        self.closed = True
+        if self.transport is not None:
+            self.transport.abort()
+
+    def info(self) -> ConnectionInfo:
+        transport = self.transport
+        return ConnectionInfo(
+            index=self.index,
+            peer=self.peer,
+            received=self.received,
+            buffered=self.decoder.buffered,
+            pending=len(self.queue),
+            write_buffer=transport.get_write_buffer_size() if transport else 0,
+            reading_paused=self._reading_paused,
+        )
+
+
+class Emulator:
+    """A running KUKAVARPROXY emulator: ``async with Emulator(EmulatorConfig(port=0)) as emu``."""
+
+    def __init__(
+        self, config: EmulatorConfig | None = None, *, store: VariableStore | None = None
+    ) -> None:
+        self.config = config if config is not None else EmulatorConfig()
+        self.store = store if store is not None else build_store(self.config)
+        self.faults = FaultSet(self.config.faults)
+        self.stats = Stats()
+        self.latency = self.config.latency_profile
+        self.responder = Responder(
+            self.store, strict=self.config.strict, ping="no-ping" not in self.config.quirks
+        )
+        self.legacy_ids = "legacy-ids" in self.config.quirks
+        self.service: ServiceQueue | None = None
+        self.host = self.config.host
+        self.port = self.config.port
+        #: The bound UDP discovery port, or None when discovery is off.
+        self.udp_port: int | None = None
+        self._server: asyncio.Server | None = None
+        self._connections: dict[int, _Connection] = {}
+        self._last_index = 0
+        self._idle_task: asyncio.Task[None] | None = None
+        self._discovery: asyncio.DatagramTransport | None = None
+
+    @property
+    def slow(self) -> bool:
+        """True when replies must go through the per-connection worker (latency or faults)."""
+        return self.service is not None or bool(self.faults)
+
+    @property
+    def address(self) -> tuple[str, int]:
+        return self.host, self.port
+
+    async def start(self) -> Self:
+        if self._server is not None:
+            return self
+        loop = asyncio.get_running_loop()
+        if self.latency is not None:
+            self.service = ServiceQueue(self.latency, random.Random(self.config.seed))
+        self._server = await loop.create_server(
+            lambda: _Connection(self), self.config.host, self.config.port, reuse_address=True
+        )
+        self.host, self.port = self._server.sockets[0].getsockname()[:2]
+        if self.config.idle_timeout > 0:
+            self._idle_task = loop.create_task(self._watch_idle())
+        if self.config.discovery_enabled:
+            await self._start_discovery()
+        log.info("KUKAVARPROXY emulator listening on %s:%d", self.host, self.port)
+        return self
+
+    async def _start_discovery(self) -> None:
+        try:
+            transport, _ = await start_discovery(
+                self.config.host, self.config.udp_port, self.config.udp_reply_port, self.identity
+            )
+        except OSError as exc:  # UDP 6999 taken: serve TCP anyway
+            log.warning("UDP discovery on port %d unavailable: %s", self.config.udp_port, exc)
+            return
+        self._discovery = transport
+        self.udp_port = transport.get_extra_info("sockname")[1]
+
+    def identity(self) -> tuple[str, str]:
+        """(model, serial) as announced by discovery: ``$MODEL_NAME[]`` unquoted, ``$KR_SERIALNO``."""
+        model = self.responder._lookup("$MODEL_NAME[]") or ""
+        serial = self.responder._lookup("$KR_SERIALNO") or ""
+        return model.strip().strip('"'), serial.strip()
+
+    async def close(self) -> None:
+        server, self._server = self._server, None
+        if server is None:
+            return
+        server.close()
+        if self._idle_task is not None:
+            self._idle_task.cancel()
+            self._idle_task = None
+        if self._discovery is not None:
+            self._discovery.close()
+            self._discovery = None
+        for conn in list(self._connections.values()):
+            conn.close()
+        await asyncio.sleep(0)
+        for conn in list(self._connections.values()):
+            conn.abort()  # still open: a client that does not read its replies
+        await server.wait_closed()
+        await asyncio.sleep(0)
+        log.info("emulator on %s:%d stopped", self.host, self.port)
+
+    async def __aenter__(self) -> Self:
+        return await self.start()
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        await self.close()
+
+    async def serve_forever(self) -> None:
+        """Start if needed and serve until cancelled."""
+        await self.start()
+        assert self._server is not None
+        await self._server.serve_forever()
+
+    def connections(self) -> list[ConnectionInfo]:
+        return [conn.info() for conn in self._connections.values()]
+
+    # -- bookkeeping used by _Connection -------------------------------------------------
+
+    def _admit(self, conn: _Connection) -> bool:
+        limit = self.config.max_clients
+        if self._server is None or (limit and len(self._connections) >= limit):
+            self.stats.rejected += 1
+            log.info("refusing %s: %d clients connected", conn.peer, len(self._connections))
+            return False
+        self._last_index += 1
+        conn.index = self._last_index
+        self._connections[conn.index] = conn
+        self.stats.connections += 1
+        self.stats.clients = len(self._connections)
+        return True
+
+    def _forget(self, conn: _Connection) -> None:
+        self._connections.pop(conn.index, None)
+        self.stats.clients = len(self._connections)
+
+    async def _watch_idle(self) -> None:
+        # KVP checks once a second; a finer tick keeps short test timeouts accurate.
+        timeout = self.config.idle_timeout
+        interval = min(1.0, timeout / 4)
+        while True:
+            await asyncio.sleep(interval)
+            limit = time.monotonic() - timeout
+            for conn in list(self._connections.values()):
+                if not conn.closed and conn.last_rx < limit:
+                    log.info(
+                        "client %d (%s) idle for %.1f s, dropped", conn.index, conn.peer, timeout
+                    )
+                    self.stats.idle_drops += 1
+                    conn.close()

@@ -1,0 +1,141 @@
+"""pytest fixtures for tests that need a live emulator.
+
+Enable them in a conftest with ``pytest_plugins = ["kukavarproxy_emu.testing"]`` (or import the
+fixture names into a test module). All of them bind 127.0.0.1 on an ephemeral port with no
+latency and no discovery, and close the emulator after the test:
+
+* ``emulator`` — an async fixture yielding a started :class:`Emulator`;
+* ``emulator_factory`` — ``await emulator_factory(strict=True, ...)``: any EmulatorConfig field
+  as a keyword (``store=`` for a prepared store), as many emulators as the test wants;
+* ``emulator_thread`` — an :class:`EmulatorThread` for synchronous code (CLI tests).
+
+:class:`RawClient` is a deliberately dumb asyncio client speaking raw frames (no ids, no
+retries), for tests that need to see exactly the bytes the emulator sends.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator, Awaitable, Iterator
+from dataclasses import replace
+from types import TracebackType
+from typing import Any, Protocol, Self
+
+import pytest
+import pytest_asyncio
+
+from pyopenshowvar.protocol import HEADER_SIZE, Reply, decode_reply
+
+from .config import EmulatorConfig
+from .server import Emulator
+from .store import VariableStore
+from .threaded import EmulatorThread
+
+__all__ = [
+    "TEST_CONFIG",
+    "EmulatorFactory",
+    "RawClient",
+    "emulator",
+    "emulator_factory",
+    "emulator_thread",
+]
+
+#: The configuration every fixture starts from.
+TEST_CONFIG = EmulatorConfig(port=0, latency="none", discovery=False)
+
+
+class RawClient:
+    """One TCP connection that sends bytes and reads whole frames, with timeouts."""
+
+    def __init__(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        self.reader = reader
+        self.writer = writer
+
+    @classmethod
+    async def connect(cls, host: str, port: int) -> RawClient:
+        reader, writer = await asyncio.open_connection(host, port)
+        return cls(reader, writer)
+
+    async def send(self, data: bytes) -> None:
+        self.writer.write(data)
+        await self.writer.drain()
+
+    async def read_frame(self, timeout: float = 2.0) -> bytes:
+        """One whole frame as framed by its length field (raises TimeoutError, EOF errors)."""
+        async with asyncio.timeout(timeout):
+            header = await self.reader.readexactly(HEADER_SIZE)
+            body = await self.reader.readexactly(int.from_bytes(header[2:4], "big"))
+        return header + body
+
+    async def read_reply(self, timeout: float = 2.0) -> Reply:
+        return decode_reply(await self.read_frame(timeout))
+
+    async def request(self, frame: bytes, timeout: float = 2.0) -> bytes:
+        await self.send(frame)
+        return await self.read_frame(timeout)
+
+    async def read_until_eof(self, timeout: float = 2.0) -> bytes:
+        """Everything until the server closes (raises TimeoutError if it does not)."""
+        async with asyncio.timeout(timeout):
+            return await self.reader.read()
+
+    async def is_closed_by_peer(self, timeout: float = 2.0) -> bool:
+        """True when the server closes within ``timeout`` without sending anything more."""
+        try:
+            async with asyncio.timeout(timeout):
+                data = await self.reader.read(1)
+        except TimeoutError:
+            return False
+        except ConnectionError:
+            return True
+        return data == b""
+
+    async def close(self) -> None:
+        self.writer.close()
+        try:
+            await self.writer.wait_closed()
+        except ConnectionError:
+            pass
+
+    async def __aenter__(self) -> Self:
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        await self.close()
+
+
+class EmulatorFactory(Protocol):
+    def __call__(
+        self, *, store: VariableStore | None = None, **overrides: Any
+    ) -> Awaitable[Emulator]: ...
+
+
+@pytest_asyncio.fixture
+async def emulator_factory() -> AsyncIterator[EmulatorFactory]:
+    started: list[Emulator] = []
+
+    async def make(*, store: VariableStore | None = None, **overrides: Any) -> Emulator:
+        emu = Emulator(replace(TEST_CONFIG, **overrides), store=store)
+        await emu.start()
+        started.append(emu)
+        return emu
+
+    yield make
+    for emu in reversed(started):
+        await emu.close()
+
+
+@pytest_asyncio.fixture
+async def emulator(emulator_factory: EmulatorFactory) -> Emulator:
+    return await emulator_factory()
+
+
+@pytest.fixture
+def emulator_thread() -> Iterator[EmulatorThread]:
+    with EmulatorThread(TEST_CONFIG) as emu:
+        yield emu
