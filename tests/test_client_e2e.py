@@ -192,3 +192,26 @@ async def test_stats_histogram(kvp: Client) -> None:
     assert snap.count >= 50 and 0 < snap.p50 <= snap.p99 <= snap.maximum
     hist = kvp.stats.histogram(10)
     assert sum(c for _, _, c in hist) == snap.window
+
+
+async def test_plc_array_modes(kvp: Client, emulator: Any) -> None:
+    emulator.store.declare("MYWORDS", "INT", dims=(4,))
+    await kvp.write_array_words("MYWORDS[]", [1, 2, 300, 65535])
+    # mode 3 writes NAME[1..k] as INT text, each word taken unsigned (VB wordToLong)
+    assert [await kvp.read(f"MYWORDS[{i}]") for i in (1, 3, 4)] == ["1", "300", "65535"]
+    words = await kvp.read_array_words("MYWORDS[]")
+    assert words[:3] == [1, 2, 300] and len(words) == 4
+
+
+async def test_wait_path_done(kvp: Client, emulator: Any) -> None:
+    async def finish_later() -> None:
+        await asyncio.sleep(0.1)
+        emulator.store.write("PATH_DONE", "TRUE")
+
+    task = asyncio.create_task(finish_later())
+    waited = await kvp.wait_path_done(poll=0.01, timeout=5.0)
+    await task
+    assert 0.05 < waited < 2.0
+    emulator.store.write("PATH_DONE", "FALSE")
+    with pytest.raises(TimeoutError):
+        await kvp.wait_path_done(poll=0.01, timeout=0.1)

@@ -292,3 +292,33 @@ async def test_pipelining_never_exceeds_the_proxy_read_buffer() -> None:
         server.close()
     assert max(sizes) <= 2048
     assert len(sizes) < 400  # requests were coalesced, not sent one segment each
+
+
+async def test_torques_fall_back_to_pipelined_element_reads() -> None:
+    # A proxy that cannot read the whole array answers an empty value (KVP's "unknown").
+    seen: list[str] = []
+
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        seen.append(req.name)
+        if req.name.endswith("[]"):
+            w.write(answer(req, b""))
+        else:
+            idx = int(req.name.split("[")[1].rstrip("]"))
+            w.write(answer(req, f"{-1.5 * idx}".encode()))
+
+    async with broken_server(handler) as port, Client(port=port) as kvp:
+        tau = await kvp.read_joint_torques()
+        assert list(tau) == [-1.5, -3.0, -4.5, -6.0, -7.5, -9.0]
+        tau = await kvp.read_joint_torques()  # the fallback is remembered: no second [] read
+    assert seen.count("$TORQUE_AXIS_ACT[]") == 1
+    assert len(seen) == 13
+
+
+async def test_garbage_reply_drops_the_connection_with_a_protocol_message() -> None:
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        w.write(b"\x00\x01\x00\x03\x00\x00\x05")  # L = 3 is impossible for a reply
+
+    async with broken_server(handler) as port, Client(port=port) as kvp:
+        with pytest.raises(KvpConnectionError, match="shorter than the minimum"):
+            await kvp.read("X")
+        assert not kvp.connected
