@@ -12,49 +12,39 @@ prints as one quoted text). A partial aggregate ``{X 10}`` changes only the memb
 Every write parses and validates first and then swaps in one fully built value, so a reader
 never sees a half-written struct and a refused write changes nothing. The store is used from a
 single asyncio thread; it has no locks.
+
+The name grammar and array addressing live in :mod:`kukavarproxy_emu.names`, the type rules
+(coercion, validation, struct merging) in :mod:`kukavarproxy_emu.values`; this module ties them
+to the declared variables and the read-text cache.
 """
 
 from __future__ import annotations
 
 import logging
-import re
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from functools import lru_cache, partial
+from functools import partial
 from importlib.metadata import PackageNotFoundError, version
-from math import isfinite, prod
-from numbers import Integral, Real
 from typing import Protocol
 
 from pyopenshowvar.errors import KrlValueError
 from pyopenshowvar.krl import (
     BUILTIN_TYPES,
-    TYPED_STRUCTS,
     Kind,
-    KrlEnum,
     KrlValue,
     Struct,
     TypeRegistry,
     TypeSpec,
     format_krc4,
-    parse_value,
 )
 
 from .datfile import DatFile, load_default_config, parse_dat
-from .sysvars import INT_MAX, INT_MIN, system_variables
+from .names import Var, VarPath, parse_name
+from .sysvars import system_variables
+from .values import CHAR_LEN, Range, Refused, check, check_ranges, coerce, parse_text, rebuild
 
 __all__ = ["Range", "UnknownVariable", "VariableStore", "WriteRefused"]
 
 log = logging.getLogger(__name__)
-
-Range = tuple[float, float]
-_FLOAT32_MAX = 3.4028234663852886e38  # a KRL REAL is a float32
-_NAME = re.compile(
-    r"(@?[A-Z_$][A-Z0-9_$]*)(?:\[([0-9,\s]*)\])?((?:\.[A-Z_$][A-Z0-9_$]*)*)\Z", re.ASCII
-)
-_CHAR_LEN = re.compile(r"CHAR\s*\[\s*([0-9]+)\s*\]\Z")
-_MEMBER_BRACKETS = re.compile(r'("[^"]*")|([A-Za-z_$][A-Za-z0-9_$]*)[ \t]*\[[ \t]*\]')
-_PLAIN_INT = re.compile(r"\s*[+-]?[0-9]+\s*\Z")
 
 
 def _proxy_version() -> str:
@@ -87,198 +77,10 @@ class WriteRefused(ValueError):
         self.reason = reason
 
 
-class _Refused(Exception):
-    """Internal: a reason to refuse, before the caller's name is attached."""
-
-
 class _Producer(Protocol):
     """Builds the new value for a target of the given type (parses text or coerces a value)."""
 
     def __call__(self, spec: TypeSpec, type_name: str) -> KrlValue: ...
-
-
-@dataclass(frozen=True, slots=True)
-class _Path:
-    """A parsed variable name: base, optional index (``()`` = ``NAME[]``), members."""
-
-    base: str
-    index: tuple[int, ...] | None
-    members: tuple[str, ...]
-
-
-@lru_cache(maxsize=8192)
-def _parse_name(name: str) -> _Path | None:
-    # Cached: a server sees the same few names thousands of times a second.
-    m = _NAME.match(name.strip().upper())
-    if m is None:
-        return None
-    base, inside, members = m.groups()
-    index: tuple[int, ...] | None = None
-    if inside is not None:
-        if inside.strip():
-            try:
-                index = tuple(int(part) for part in inside.split(","))
-            except ValueError:
-                return None
-        elif members:
-            return None  # "NAME[].X" means nothing
-        else:
-            index = ()
-    return _Path(base, index, tuple(members[1:].split(".")) if members else ())
-
-
-class _Var:
-    """One declared variable. Arrays keep a flat row-major list; a CHAR array is one str."""
-
-    __slots__ = ("dims", "elems", "name", "ranges", "read_only", "spec", "text_len", "type_name")
-
-    def __init__(self, name: str, type_name: str, spec: TypeSpec, dims: tuple[int, ...]) -> None:
-        self.name = name
-        self.type_name = type_name
-        self.spec = spec
-        self.dims = dims
-        self.read_only = False
-        self.ranges: Range | Mapping[str, Range] | None = None
-        # A CHAR array is text (one str value); every other array holds its elements.
-        self.text_len = dims[0] if spec.kind is Kind.STR and dims else 0
-        size = prod(dims) if dims and not self.text_len else 1
-        self.elems: list[KrlValue | None] = [None] * size
-
-    @property
-    def is_array(self) -> bool:
-        return bool(self.dims) and not self.text_len
-
-    def slot(self, path: _Path) -> int:
-        """The flat index ``path`` addresses; raises _Refused for a form that does not fit."""
-        if self.text_len:
-            if path.index == () or (path.index is not None and len(path.index) == 1):
-                return 0
-            raise _Refused("a CHAR array is addressed as NAME[] or NAME[i]")
-        if not self.dims:
-            if path.index is not None:
-                raise _Refused("not an array")
-            return 0
-        if not path.index:
-            raise _Refused("an array needs an index NAME[i]")
-        if len(path.index) != len(self.dims):
-            raise _Refused(f"needs {len(self.dims)} indices")
-        flat = 0
-        for i, size in zip(path.index, self.dims, strict=True):
-            if not 1 <= i <= size:
-                raise _Refused(f"index {i} out of bounds 1..{size}")
-            flat = flat * size + i - 1
-        return flat
-
-
-def _member_specs(
-    registry: TypeRegistry, spec: TypeSpec, type_name: str, members: tuple[str, ...]
-) -> list[tuple[TypeSpec, str]]:
-    """(spec, type name) of the element and of each member on the path, outermost first."""
-    chain = [(spec, type_name)]
-    for member in members:
-        if spec.struct is None:
-            raise _Refused(f"{type_name} has no members")
-        member_type = spec.struct.member_type(member)
-        if member_type is None:
-            raise _Refused(f"{spec.struct.name} has no member {member}")
-        spec, type_name = registry.resolve(member_type), member_type
-        chain.append((spec, type_name))
-    return chain
-
-
-def _normalise(value: KrlValue, spec: TypeSpec) -> KrlValue:
-    """A struct in its declared type with members in declaration order (as a KRC prints it)."""
-    if spec.struct is None or not isinstance(value, Struct):
-        return value
-    sdef = spec.struct
-    cls = TYPED_STRUCTS.get(sdef.name)
-    if cls is not None and isinstance(value, cls):
-        return value  # typed structs keep canonical order themselves
-    if cls is not None:
-        return cls().merged(value)  # coerces and orders the members
-    return Struct(sdef.name, {m: value[m] for m in sdef.member_names if m in value})
-
-
-def _rebuild(
-    old: KrlValue | None, chain: list[tuple[TypeSpec, str]], members: tuple[str, ...], new: KrlValue
-) -> KrlValue:
-    """``old`` with ``new`` put at ``members``; partial structs merge, as KRL aggregates do."""
-    spec = chain[0][0]
-    if not members:
-        if isinstance(old, Struct) and isinstance(new, Struct):
-            if spec.struct is not None and len(new) == len(spec.struct.members):
-                # complete and flat (nested partials must merge): nothing to keep from old
-                if not any(isinstance(v, Struct) for v in new.values()):
-                    return _normalise(new, spec)
-            return _normalise(old.merged(new), spec)
-        return _normalise(new, spec)
-    base = old if isinstance(old, Struct) else Struct(spec.name, {})
-    child = _rebuild(base.get(members[0]), chain[1:], members[1:], new)
-    return _normalise(base.merged({members[0]: child}), spec)
-
-
-def _coerce(value: object, spec: TypeSpec, registry: TypeRegistry) -> KrlValue:
-    """A typed Python value converted to ``spec`` (numpy scalars accepted), or _Refused."""
-    kind = spec.kind
-    if kind is Kind.REAL and isinstance(value, Real) and not isinstance(value, bool):
-        return float(value)
-    if kind is Kind.INT and isinstance(value, Integral) and not isinstance(value, bool):
-        if not INT_MIN <= int(value) <= INT_MAX:
-            raise _Refused(f"INT {value} out of the 32-bit range")
-        return int(value)
-    if (kind is Kind.BOOL and isinstance(value, bool)) or (
-        kind is Kind.STR and isinstance(value, str)
-    ):
-        return value
-    if kind is Kind.ENUM and isinstance(value, KrlEnum):
-        if spec.enum is not None and value.name not in spec.enum.values:
-            raise _Refused(f"{value} is not a value of ENUM {spec.name}")
-        return value
-    if kind is Kind.STRUCT and isinstance(value, Struct) and spec.struct is not None:
-        cls = TYPED_STRUCTS.get(spec.struct.name)
-        if cls is not None and isinstance(value, cls):
-            return value  # the typed constructor has coerced the members already
-        members: dict[str, KrlValue] = {}
-        for member, member_value in value.items():
-            member_type = spec.struct.member_type(member)
-            if member_type is None:
-                raise _Refused(f"{spec.struct.name} has no member {member}")
-            members[member] = _coerce(member_value, registry.resolve(member_type), registry)
-        return _normalise(Struct(spec.name, members), spec)
-    raise _Refused(f"{value!r} is not a {spec.name} value")
-
-
-def _check(value: KrlValue, spec: TypeSpec, type_name: str, registry: TypeRegistry) -> None:
-    """Refuse what the parser lets through but a KRC cannot hold or print."""
-    if isinstance(value, float):
-        if not (isfinite(value) and abs(value) <= _FLOAT32_MAX):
-            raise _Refused(f"{value!r} is out of the REAL (float32) range")
-    elif isinstance(value, str):
-        limit = _CHAR_LEN.match(type_name)
-        if limit is not None and len(value) > int(limit.group(1)):
-            raise _Refused(f"text longer than {limit.group(1)} characters")
-        if '"' in value or (not value.isascii() and not _is_latin1(value)):
-            raise _Refused("a CHAR text must be latin-1 without double quotes")
-    elif isinstance(value, Struct) and spec.struct is not None:
-        for member, member_value in value.items():
-            member_type = spec.struct.member_type(member)
-            if member_type is not None:
-                member_spec = registry.resolve(member_type)
-                _check(member_value, member_spec, member_type, registry)
-
-
-def _is_latin1(text: str) -> bool:
-    try:
-        text.encode("latin-1")
-    except UnicodeEncodeError:
-        return False
-    return True
-
-
-def _check_range(value: KrlValue | None, rng: Range, what: str) -> None:
-    if isinstance(value, int | float) and not isinstance(value, bool):
-        if not rng[0] <= value <= rng[1]:
-            raise _Refused(f"{what} {value} out of range {rng[0]}..{rng[1]}")
 
 
 class VariableStore:
@@ -303,10 +105,10 @@ class VariableStore:
     ) -> None:
         self.registry = (registry if registry is not None else BUILTIN_TYPES).copy()
         self.strict = strict
-        self._vars: dict[str, _Var] = {}
+        self._vars: dict[str, Var] = {}
         self._info = {**DEFAULT_INFO, **{k.upper(): v for k, v in (info or {}).items()}}
         # read() text per base name and path; dropped whenever the variable changes
-        self._text: dict[str, dict[_Path, str]] = {}
+        self._text: dict[str, dict[VarPath, str]] = {}
         self._system: set[str] = set()
         if system:
             for sv in system_variables(overrides):
@@ -334,13 +136,13 @@ class VariableStore:
         ``"CP"`` to limits. Raises ``ValueError`` (or ``KrlValueError``) for a bad declaration.
         """
         key = name.strip().upper()
-        path = _parse_name(key)
+        path = parse_name(key)
         if path is None or path.index is not None or path.members or key.startswith("@"):
             raise ValueError(f"invalid variable name {name!r}")
         if key in self._vars and (not replace or key in self._system):
             raise ValueError(f"variable {key} is already declared")
         type_name = type_name.strip().upper()
-        sized = _CHAR_LEN.match(type_name)
+        sized = CHAR_LEN.match(type_name)
         if sized is not None and not dims:  # "CHAR[32]" is the same as CHAR with dims (32,)
             type_name, dims = "CHAR", (int(sized.group(1)),)
         spec = self.registry.resolve(type_name)
@@ -348,14 +150,14 @@ class VariableStore:
             raise ValueError(f"invalid type/dimensions for {key}: {type_name}{list(dims)}")
         if spec.kind is Kind.STR and len(dims) > 1:
             raise ValueError(f"{key}: multi-dimensional CHAR arrays are not supported")
-        var = _Var(key, type_name, spec, tuple(dims))
+        var = Var(key, type_name, spec, tuple(dims))
         var.ranges = ranges
         texts = [init] if isinstance(init, str) or init is None else list(init)
         if var.is_array and len(texts) == 1:
             texts *= len(var.elems)
         if len(texts) > len(var.elems):
             raise ValueError(f"{key}: {len(texts)} initial values for {len(var.elems)} elements")
-        chain = self._chain(var, ())
+        chain = var.chain(self.registry, ())
         parsed: dict[str, KrlValue] = {}  # "FALSE" x 4096 is parsed once
         for i, text in enumerate(texts):
             if text is None:
@@ -363,7 +165,7 @@ class VariableStore:
             if text not in parsed:
                 try:
                     parsed[text] = self._parse(*chain[0], text)
-                except _Refused as exc:
+                except Refused as exc:
                     raise ValueError(f"initial value of {key}: {exc}") from None
             var.elems[i] = parsed[text]
         var.read_only = read_only
@@ -404,7 +206,7 @@ class VariableStore:
                 self._dat_problem(dat, decl.line, f"declaration of {decl.name}: {exc}")
         names = set(declared)
         for assign in dat.assignments:
-            path = _parse_name(assign.target)
+            path = parse_name(assign.target)
             if path is None or path.base not in names:
                 self._dat_problem(dat, assign.line, f"{assign.target} is not declared here")
                 continue
@@ -424,7 +226,7 @@ class VariableStore:
     # --- text interface (the server) ---------------------------------------------------------
     def read(self, name: str) -> str:
         """The KRC4 text of ``name``; raises :class:`UnknownVariable` (KVP: empty + success)."""
-        path = _parse_name(name)
+        path = parse_name(name)
         if path is None:
             raise UnknownVariable(name)
         cache = self._text.get(path.base)
@@ -456,12 +258,12 @@ class VariableStore:
     def get(self, name: str) -> KrlValue:
         """The typed value of ``name``; a whole array (``NAME`` or ``NAME[]``) is a new list,
         row-major for N-D arrays. Raises :class:`UnknownVariable` like :meth:`read`."""
-        path = _parse_name(name)
+        path = parse_name(name)
         if path is None:
             raise UnknownVariable(name)
         var = self._vars.get(path.base)
         if var is not None and var.is_array and path.index is None and not path.members:
-            path = _Path(path.base, (), ())
+            path = VarPath(path.base, (), ())
         return self._lookup(path, name, nd_whole=True)
 
     def set_system(self, name: str, value: object) -> None:
@@ -471,7 +273,7 @@ class VariableStore:
         list of every element). It is checked against the type exactly like written text; a
         partial struct changes only its members. Raises :class:`UnknownVariable` or :class:`WriteRefused`.
         """
-        path = _parse_name(name)
+        path = parse_name(name)
         var = self._vars.get(path.base) if path is not None else None
         if path is None or var is None:
             raise UnknownVariable(name)
@@ -480,20 +282,20 @@ class VariableStore:
             if not isinstance(value, list) or len(value) != len(var.elems):
                 raise WriteRefused(name, f"needs a list of {len(var.elems)} values")
             try:
-                elems: list[KrlValue | None] = [_coerce(v, var.spec, reg) for v in value]
+                elems: list[KrlValue | None] = [coerce(v, var.spec, reg) for v in value]
                 for elem in elems:
                     assert elem is not None
-                    _check(elem, var.spec, var.type_name, reg)
-                    self._check_ranges(var, elem)
-            except _Refused as exc:
+                    check(elem, var.spec, var.type_name, reg)
+                    check_ranges(var.ranges, var.name, elem)
+            except Refused as exc:
                 raise WriteRefused(name, str(exc)) from None
             var.elems = elems
             self._text.pop(var.name, None)
             return
 
         def produce(spec: TypeSpec, type_name: str) -> KrlValue:
-            coerced = _coerce(value, spec, reg)
-            _check(coerced, spec, type_name, reg)
+            coerced = coerce(value, spec, reg)
+            check(coerced, spec, type_name, reg)
             return coerced
 
         self._assign(name, produce, bypass_read_only=True)
@@ -504,7 +306,7 @@ class VariableStore:
 
     def is_read_only(self, name: str) -> bool:
         """Whether KUKAVARPROXY writes to ``name`` (or any part of it) are refused."""
-        path = _parse_name(name)
+        path = parse_name(name)
         if path is None or (path.base not in self._vars and path.base not in self._info):
             raise UnknownVariable(name)
         var = self._vars.get(path.base)
@@ -515,7 +317,7 @@ class VariableStore:
         return {k: (list(v.elems) if v.is_array else v.elems[0]) for k, v in self._vars.items()}
 
     # --- internals ---------------------------------------------------------------------------
-    def _lookup(self, path: _Path, name: str, *, nd_whole: bool = False) -> KrlValue:
+    def _lookup(self, path: VarPath, name: str, *, nd_whole: bool = False) -> KrlValue:
         var = self._vars.get(path.base)
         if var is None:
             raise UnknownVariable(name)
@@ -527,7 +329,7 @@ class VariableStore:
             return [e for e in var.elems if e is not None]
         try:
             value = var.elems[var.slot(path)]
-        except _Refused:
+        except Refused:
             raise UnknownVariable(name) from None
         if var.text_len and path.index:
             # one character of the text; beyond the current text it is uninitialised
@@ -543,74 +345,34 @@ class VariableStore:
             raise UnknownVariable(name)
         return value
 
-    def _chain(self, var: _Var, members: tuple[str, ...]) -> list[tuple[TypeSpec, str]]:
-        if var.spec.kind is Kind.STR:  # a CHAR array is text; a single CHAR is one character
-            elem_type = f"CHAR[{var.text_len or 1}]"
-        else:
-            elem_type = var.type_name
-        return _member_specs(self.registry, var.spec, elem_type, members)
-
     def _parse(self, spec: TypeSpec, type_name: str, text: str) -> KrlValue:
         """Parse ``text`` as a fully validated value of the given type."""
-        if self.strict and spec.kind is Kind.INT and not _PLAIN_INT.match(text):
-            raise _Refused("strict: an INT needs plain decimal text")
-        if "[" in text:
-            # $CONFIG.DAT writes CHAR members as NAME[] "text"; the krl parser wants NAME "text"
-            text = _MEMBER_BRACKETS.sub(lambda m: m.group(1) or m.group(2), text)
-        try:
-            value = parse_value(text, type_name, registry=self.registry)
-        except KrlValueError as exc:
-            raise _Refused(str(exc)) from None
-        _check(value, spec, type_name, self.registry)
-        return value
+        return parse_text(text, spec, type_name, self.registry, strict=self.strict)
 
     def _assign(self, name: str, produce: _Producer, *, bypass_read_only: bool) -> None:
         """Resolve ``name``, build its new value with ``produce`` and swap it in."""
-        path = _parse_name(name)
+        path = parse_name(name)
         try:
             if path is None:
-                raise _Refused("not a variable name")
+                raise Refused("not a variable name")
             var = self._vars.get(path.base)
             if var is None:
-                raise _Refused("read-only" if path.base in self._info else "unknown variable")
+                raise Refused("read-only" if path.base in self._info else "unknown variable")
             if var.read_only and not bypass_read_only:
-                raise _Refused("read-only")
+                raise Refused("read-only")
             if var.is_array and path.index == ():
-                raise _Refused("whole-array writes are only possible for CHAR arrays")
+                raise Refused("whole-array writes are only possible for CHAR arrays")
             slot = var.slot(path)
-            chain = self._chain(var, path.members)
+            chain = var.chain(self.registry, path.members)
             new_elem: KrlValue
             if var.text_len and path.index:
-                new_elem = self._put_char(var, path.index[0], produce(chain[0][0], "CHAR"))
+                new_elem = var.put_char(path.index[0], produce(chain[0][0], "CHAR"))
             else:
                 value = produce(*chain[-1])
-                new_elem = _rebuild(var.elems[slot], chain, path.members, value)
-            self._check_ranges(var, new_elem)
-        except _Refused as exc:
+                new_elem = rebuild(var.elems[slot], chain, path.members, value)
+            check_ranges(var.ranges, var.name, new_elem)
+        except Refused as exc:
             raise WriteRefused(name, str(exc)) from None
         # The new value is complete: swapping it in is the only mutation.
         var.elems[slot] = new_elem
         self._text.pop(var.name, None)
-
-    def _put_char(self, var: _Var, i: int, char: KrlValue) -> str:
-        if not 1 <= i <= var.text_len:
-            raise _Refused(f"index {i} out of bounds 1..{var.text_len}")
-        if not isinstance(char, str) or len(char) != 1:
-            raise _Refused("a CHAR element takes exactly one character")
-        old = var.elems[0]
-        # Characters before i that were never set become blanks (KRL leaves them undefined).
-        text = (old if isinstance(old, str) else "").ljust(i - 1)
-        return text[: i - 1] + char + text[i:]
-
-    def _check_ranges(self, var: _Var, value: KrlValue) -> None:
-        ranges = var.ranges
-        if ranges is None:
-            return
-        if isinstance(ranges, tuple):
-            _check_range(value, ranges, var.name)
-            return
-        for member_path, rng in ranges.items():
-            part: KrlValue | None = value
-            for member in member_path.upper().split("."):
-                part = part.get(member) if isinstance(part, Struct) else None
-            _check_range(part, rng, f"{var.name}.{member_path.upper()}")
