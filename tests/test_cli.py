@@ -43,7 +43,11 @@ def test_write_struct_literal_with_commas(emulator_thread: Any) -> None:
 
 
 def test_env_vars_select_the_proxy(emulator_thread: Any) -> None:
-    res = runner.invoke(app, ["read", "$OV_PRO"], env={"KVP_HOST": "127.0.0.1", "KVP_PORT": str(emulator_thread.port)})
+    res = runner.invoke(
+        app,
+        ["read", "$OV_PRO"],
+        env={"KVP_HOST": "127.0.0.1", "KVP_PORT": str(emulator_thread.port)},
+    )
     assert res.exit_code == 0 and res.stdout.strip() == "100"
 
 

@@ -1,0 +1,162 @@
+"""Shared plumbing of the ``kvp`` tools: options, exit codes, error lines, the embedded emulator.
+
+Every subcommand goes through :func:`run` (or :func:`fail_for` for long-running loops), so
+each library error becomes exactly one line on stderr that names host, port and variable,
+and a documented exit code — never a traceback:
+
+====  ==========================================================
+0     success
+2     usage error (bad option or argument)
+3     cannot connect / connection lost (also: ``discover`` found nothing)
+4     timeout
+5     unknown variable or refused write
+6     protocol or value-parse error
+====  ==========================================================
+
+This module must stay cheap to import: ``kvp read`` is on the hot path of shell scripts.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from collections.abc import Awaitable, Callable
+from typing import Any, NoReturn, TypeVar
+
+import typer
+
+from pyopenshowvar import (
+    Client,
+    KrlEnum,
+    KvpConnectionError,
+    KvpError,
+    KvpTimeoutError,
+    ProtocolError,
+    Struct,
+    UnknownVariableError,
+    WriteRefusedError,
+)
+from pyopenshowvar.errors import KrlValueError, ReadFailedError
+
+EXIT_OK = 0
+EXIT_USAGE = 2
+EXIT_CONNECTION = 3
+EXIT_TIMEOUT = 4
+EXIT_VARIABLE = 5
+EXIT_PROTOCOL = 6
+EXIT_INTERRUPTED = 130
+
+T = TypeVar("T")
+
+
+class Opts:
+    """The global options of one ``kvp`` invocation (set by the typer callback)."""
+
+    host = "127.0.0.1"
+    port = 7000
+    timeout = 2.0
+    emulator: Any = None
+
+    @classmethod
+    def where(cls) -> str:
+        return f"{cls.host}:{cls.port}"
+
+
+def start_embedded_emulator() -> Any:
+    """An in-process emulator on an ephemeral port, stopped when the command ends.
+
+    Idempotent: ``kvp --emulate monitor --emulate`` starts one emulator only.
+    """
+    if Opts.emulator is not None:
+        return Opts.emulator
+    import atexit
+
+    from kukavarproxy_emu import EmulatorConfig, EmulatorThread
+
+    thread = EmulatorThread(EmulatorConfig(host="127.0.0.1", port=0))
+    thread.start()
+    atexit.register(thread.stop)
+    Opts.emulator = thread
+    Opts.host, Opts.port = "127.0.0.1", thread.port
+    return thread
+
+
+def fail(code: int, message: str) -> NoReturn:
+    """Print ``kvp: message`` on stderr and exit with ``code``."""
+    typer.echo(f"kvp: {message}", err=True)
+    raise typer.Exit(code)
+
+
+def classify(exc: BaseException) -> tuple[int, str]:
+    """The exit code and the one-line message for a library error."""
+    where = Opts.where()
+    if isinstance(exc, KvpTimeoutError):
+        return EXIT_TIMEOUT, f"timeout talking to {where}: {exc}"
+    if isinstance(exc, KvpConnectionError):
+        text = str(exc)
+        return EXIT_CONNECTION, text if where in text else f"{where}: {text}"
+    if isinstance(exc, UnknownVariableError | WriteRefusedError | ReadFailedError):
+        return EXIT_VARIABLE, str(exc)
+    if isinstance(exc, ProtocolError | KrlValueError):
+        return EXIT_PROTOCOL, f"{where}: {exc}"
+    if isinstance(exc, OSError):
+        return EXIT_CONNECTION, f"{where}: {exc.strerror or exc}"
+    return EXIT_PROTOCOL, f"{where}: {exc}"
+
+
+def fail_for(exc: BaseException) -> NoReturn:
+    """Exit with the code and line :func:`classify` gives for ``exc``."""
+    code, message = classify(exc)
+    fail(code, message)
+
+
+def make_client(**kw: Any) -> Client:
+    """A client for the global host/port/timeout (no keep-alive unless asked)."""
+    kw.setdefault("keepalive", None)
+    return Client(Opts.host, Opts.port, timeout=Opts.timeout, **kw)
+
+
+def run(job: Callable[[Client], Awaitable[T]], **client_kw: Any) -> T:
+    """Run ``job`` with a connected client; every library error becomes one line + exit code."""
+
+    async def main() -> T:
+        async with make_client(**client_kw) as kvp:
+            return await job(kvp)
+
+    try:
+        return asyncio.run(main())
+    except KvpError as exc:
+        fail_for(exc)
+
+
+def to_jsonable(value: Any) -> Any:
+    """KRL values as plain JSON: structs become objects with a ``"type"`` key."""
+    if isinstance(value, Struct):
+        out: dict[str, Any] = {"type": value.type_name}
+        out.update({k: to_jsonable(v) for k, v in value.members.items()})
+        return out
+    if isinstance(value, KrlEnum):
+        return str(value)
+    if isinstance(value, list):
+        return [to_jsonable(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    return value
+
+
+def flatten(name: str, value: Any) -> dict[str, Any]:
+    """Split a typed value into columns: ``NAME.MEMBER`` for structs, ``NAME[i]`` for arrays."""
+    if isinstance(value, Struct):
+        out: dict[str, Any] = {}
+        for key, member in value.members.items():
+            out.update(flatten(f"{name}.{key}", member))
+        return out
+    if isinstance(value, list):
+        base = name[:-2] if name.endswith("[]") else name
+        out = {}
+        for i, element in enumerate(value, start=1):
+            out.update(flatten(f"{base}[{i}]", element))
+        return out
+    if isinstance(value, KrlEnum):
+        return {name: str(value)}
+    return {name: value}

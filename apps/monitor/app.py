@@ -1,0 +1,282 @@
+"""The monitor application: layout, key bindings, the polling loop and the watch list.
+
+One asyncio task polls every ``1/hz`` seconds with ONE ``read_many`` (panels + watch list).
+A lost connection or a timeout is shown in the status line and retried once a second
+(``Client(auto_reconnect=True)``), so the monitor recovers by itself when the controller or
+the emulator comes back. Writes go through the same client; writing a motion variable
+(:data:`apps.names.MOTION_VARIABLES`) asks for confirmation first.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from pathlib import Path
+from typing import ClassVar
+
+from rich.text import Text
+from textual.app import App, ComposeResult
+from textual.binding import Binding, BindingType
+from textual.containers import Horizontal, Vertical
+from textual.widgets import DataTable, Footer, Static, TabbedContent, TabPane
+
+from apps.names import is_motion_variable
+from pyopenshowvar import Client, KvpConnectionError, KvpError, KvpTimeoutError
+
+from .dialogs import ConfirmDialog, InputDialog
+from .state import RobotState
+from .watchlist import WatchList
+from .widgets import JointsPanel, PlotsPanel, PosePanel, ProgramPanel, StatsPanel
+
+RETRY_SECONDS = 1.0
+
+
+class MonitorApp(App[None]):
+    """``kvp monitor``: live robot panels, plots and an editable watch list."""
+
+    TITLE = "kvp monitor"
+    ENABLE_COMMAND_PALETTE = False
+    CSS = """
+    #status { height: 1; background: $boost; padding: 0 1; }
+    #status.lost { background: $error 40%; }
+    #robot-top { height: auto; }
+    JointsPanel { width: 46; }
+    #right { width: 1fr; height: auto; }
+    DataTable { height: 1fr; }
+    #watch-hint { height: 1; color: $text-muted; }
+    TabPane { padding: 0; }
+    """
+    BINDINGS: ClassVar[list[BindingType]] = [
+        Binding("q", "quit", "Quit"),
+        Binding("1", "tab('robot')", "Robot"),
+        Binding("2", "tab('plots')", "Plots"),
+        Binding("3", "tab('watch')", "Watch"),
+        Binding("a", "add_watch", "Add"),
+        Binding("d", "remove_watch", "Del"),
+        Binding("e", "edit_watch", "Edit"),
+        Binding("r", "reconnect", "Retry"),
+    ]
+
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        *,
+        timeout: float = 1.0,
+        hz: float = 10.0,
+        watch_file: Path | None = None,
+        emulated: bool = False,
+    ) -> None:
+        super().__init__()
+        self.host, self.port, self.hz = host, port, hz
+        self.client = Client(host, port, timeout=timeout, auto_reconnect=True, keepalive=None)
+        self.state = RobotState()
+        self.watchlist = WatchList.load(watch_file)
+        self.emulated = emulated
+        self.connected = False
+        self.last_error = ""
+        self.polls = 0
+        self._wake = asyncio.Event()
+        self._task: asyncio.Task[None] | None = None
+
+    # ------------------------------------------------------------------ layout
+    def compose(self) -> ComposeResult:
+        yield Static("connecting…", id="status")
+        with TabbedContent(initial="robot"):
+            with TabPane("Robot", id="robot"):
+                with Horizontal(id="robot-top"):
+                    yield JointsPanel(id="joints")
+                    with Vertical(id="right"):
+                        yield PosePanel(id="pose")
+                        yield ProgramPanel(id="program")
+                yield StatsPanel(id="stats")
+            with TabPane("Plots", id="plots"):
+                yield PlotsPanel(id="plot-panel")
+            with TabPane("Watch", id="watch"):
+                yield DataTable(id="watch-table", cursor_type="row", zebra_stripes=True)
+                yield Static(
+                    "a add · d remove · e edit & write · saved automatically", id="watch-hint"
+                )
+        yield Footer()
+
+    def on_mount(self) -> None:
+        self.query_one("#joints").border_title = "joints (deg) · limits · torque"
+        self.query_one("#pose").border_title = "TCP pose $POS_ACT"
+        self.query_one("#program").border_title = "program"
+        self.query_one("#stats").border_title = "access time (this monitor)"
+        table = self.query_one("#watch-table", DataTable)
+        table.add_column("variable", key="name", width=22)
+        table.add_column("value", key="value")
+        for name in self.watchlist.names:
+            table.add_row(name, "…", key=name)
+        self._task = asyncio.get_running_loop().create_task(self._poll_loop())
+
+    async def on_unmount(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+        await self.client.close()
+
+    # ------------------------------------------------------------------ polling
+    async def _poll_loop(self) -> None:
+        period = 1.0 / self.hz
+        while True:
+            started = time.monotonic()
+            wait = period
+            try:
+                await self.poll_once()
+            except (KvpConnectionError, KvpTimeoutError, OSError) as exc:
+                self._lost(exc)
+                wait = RETRY_SECONDS
+            except KvpError as exc:  # protocol trouble: show it, keep going
+                self._lost(exc)
+                wait = RETRY_SECONDS
+            self._wake.clear()
+            try:
+                await asyncio.wait_for(
+                    self._wake.wait(), max(0.0, wait - (time.monotonic() - started))
+                )
+            except TimeoutError:
+                pass
+
+    async def poll_once(self) -> None:
+        """One refresh: ONE read_many for every panel variable and the watch list."""
+        was_connected = self.client.connected
+        watch = list(self.watchlist.names)
+        results = await self.client.read_many(self.state.names_to_read(watch))
+        if not was_connected and self.polls:
+            self.state.forget_limits()  # maybe another controller: re-read the limits next time
+        self.state.update(results, watch)
+        self.polls += 1
+        if not self.connected:
+            self.connected = True
+            if self.polls > 1 or self.last_error:
+                self.notify(f"connected to {self.client.endpoint}", timeout=3)
+        self.last_error = ""
+        self._refresh_view()
+
+    def _lost(self, exc: BaseException) -> None:
+        first = self.connected or not self.last_error
+        self.connected = False
+        self.last_error = str(exc) or type(exc).__name__
+        if first:
+            self.notify(f"connection problem: {self.last_error}", severity="error", timeout=4)
+        self._refresh_status()
+
+    # ------------------------------------------------------------------ drawing
+    def status_text(self) -> Text:
+        s = self.client.stats.snapshot()
+        text = Text()
+        if self.connected:
+            text.append("● connected ", style="bold green")
+        else:
+            text.append("● DISCONNECTED ", style="bold red")
+        text.append(f"{self.client.endpoint}{' (emulator)' if self.emulated else ''}  ")
+        if self.connected:
+            text.append(f"{self.hz:g} Hz  Δt mean {s.mean * 1e3:.2f} p99 {s.p99 * 1e3:.2f} ms")
+            if self.client.reconnects:
+                text.append(f"  reconnects {self.client.reconnects}")
+        else:
+            text.append(f"retrying… {self.last_error}", style="red")
+        return text
+
+    def _refresh_status(self) -> None:
+        status = self.query_one("#status", Static)
+        status.update(self.status_text())
+        status.set_class(not self.connected, "lost")
+
+    def _refresh_view(self) -> None:
+        """Redraw the status line and the panels of the visible tab only (cheap at 10 Hz)."""
+        self._refresh_status()
+        active = self.query_one(TabbedContent).active
+        if active == "robot":
+            self.query_one(JointsPanel).refresh_from(self.state)
+            self.query_one(PosePanel).refresh_from(self.state)
+            self.query_one(ProgramPanel).refresh_from(self.state)
+            self.query_one(StatsPanel).refresh_from(self.client.stats, self.client.reconnects)
+        elif active == "plots":
+            self.query_one(PlotsPanel).refresh_from(self.state)
+        elif active == "watch":
+            table = self.query_one("#watch-table", DataTable)
+            for name in self.watchlist.names:
+                value = self.state.watch.get(name, "…")
+                try:
+                    table.update_cell(name, "value", value, update_width=True)
+                except Exception:  # row just removed by the user
+                    pass
+
+    def on_tabbed_content_tab_activated(self, event: TabbedContent.TabActivated) -> None:
+        if self.state.updates:
+            self._refresh_view()
+
+    # ------------------------------------------------------------------ actions
+    def action_tab(self, tab: str) -> None:
+        self.query_one(TabbedContent).active = tab
+
+    def action_reconnect(self) -> None:
+        self._wake.set()
+
+    def action_add_watch(self) -> None:
+        self.action_tab("watch")
+
+        def done(name: str | None) -> None:
+            if name and self.watchlist.add(name):
+                self.watchlist.save()
+                self.query_one("#watch-table", DataTable).add_row(name, "…", key=name)
+                self._wake.set()
+
+        self.push_screen(
+            InputDialog("Add a variable to the watch list:", placeholder="$OV_PRO"), done
+        )
+
+    def _selected(self) -> str | None:
+        table = self.query_one("#watch-table", DataTable)
+        if not self.watchlist.names or table.row_count == 0:
+            return None
+        row = table.coordinate_to_cell_key(table.cursor_coordinate).row_key
+        return str(row.value) if row.value is not None else None
+
+    def action_remove_watch(self) -> None:
+        self.action_tab("watch")
+        name = self._selected()
+        if name and self.watchlist.remove(name):
+            self.watchlist.save()
+            self.query_one("#watch-table", DataTable).remove_row(name)
+            self.state.watch.pop(name, None)
+
+    def action_edit_watch(self) -> None:
+        self.action_tab("watch")
+        name = self._selected()
+        if name is None:
+            self.notify("the watch list is empty: press a to add a variable", severity="warning")
+            return
+        current = self.state.watch.get(name, "")
+        current = "" if current.startswith("<") else current
+
+        def got_value(value: str | None) -> None:
+            if value is None:
+                return
+            if is_motion_variable(name):
+                question = (
+                    f"{name} is a motion variable: writing it may move the robot.\nWrite {value}?"
+                )
+                self.push_screen(
+                    ConfirmDialog(question), lambda ok: self._write(name, value) if ok else None
+                )
+            else:
+                self._write(name, value)
+
+        self.push_screen(
+            InputDialog(f"New value for {name} (KRL literal):", value=current), got_value
+        )
+
+    def _write(self, name: str, value: str) -> None:
+        async def job() -> None:
+            try:
+                echo = await self.client.write(name, value)
+            except KvpError as exc:
+                self.notify(f"write failed: {exc}", severity="error", timeout=5)
+                return
+            self.notify(f"wrote {name} = {echo}", timeout=3)
+            self._wake.set()
+
+        self.run_worker(job(), group="writes")

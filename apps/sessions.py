@@ -1,0 +1,92 @@
+"""The interactive ``kvp`` commands: ``repl`` and ``monitor``.
+
+Only typer is imported here; prompt_toolkit and Textual are imported when the command runs,
+so the other subcommands start fast.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from apps.common import EXIT_USAGE, Opts, fail, fail_for, start_embedded_emulator
+from pyopenshowvar import KvpError
+
+
+def repl(
+    emulate: Annotated[
+        bool, typer.Option("--emulate", help="Start an embedded emulator and talk to it.")
+    ] = False,
+    config: Annotated[
+        list[Path] | None,
+        typer.Option("--config", help="$CONFIG.DAT whose globals are offered for completion."),
+    ] = None,
+    history: Annotated[
+        Path | None,
+        typer.Option(
+            "--history", envvar="KVP_HISTORY", help="History file [~/.local/share/kvp/history]."
+        ),
+    ] = None,
+    raw: Annotated[bool, typer.Option("--raw", help="Print raw text instead of tables.")] = False,
+) -> None:
+    """Interactive console: NAME reads, NAME VALUE writes, :watch, :help, :quit (Tab completes)."""
+    if emulate:
+        start_embedded_emulator()
+    from apps.names import completion_names
+    from apps.repl import default_history_path, run_repl
+
+    store = Opts.emulator.store if Opts.emulator is not None else None
+    try:
+        names = completion_names(store, config or [])
+    except (OSError, ValueError) as exc:
+        fail(EXIT_USAGE, f"cannot read --config: {exc}")
+    try:
+        asyncio.run(
+            run_repl(
+                Opts.host,
+                Opts.port,
+                Opts.timeout,
+                names=names,
+                history=history or default_history_path(),
+                raw=raw,
+            )
+        )
+    except KvpError as exc:
+        fail_for(exc)
+
+
+def monitor(
+    emulate: Annotated[
+        bool,
+        typer.Option("--emulate", help="Start an embedded emulator (a live robot, no hardware)."),
+    ] = False,
+    hz: Annotated[float, typer.Option("--hz", help="Refreshes per second.")] = 10.0,
+    watch_file: Annotated[
+        Path | None,
+        typer.Option(
+            "--watch-file",
+            envvar="KVP_MONITOR_FILE",
+            help="Watch-list JSON [~/.config/kvp/monitor.json].",
+        ),
+    ] = None,
+) -> None:
+    """Live Textual dashboard: joints, pose, torques, plots, status and a watch list."""
+    if not 0 < hz <= 50:
+        fail(EXIT_USAGE, f"--hz must be in (0, 50], got {hz:g}")
+    if emulate:
+        start_embedded_emulator()
+    from apps.monitor.app import MonitorApp
+    from apps.monitor.watchlist import default_watch_file
+
+    app = MonitorApp(
+        Opts.host,
+        Opts.port,
+        timeout=Opts.timeout,
+        hz=hz,
+        watch_file=watch_file or default_watch_file(),
+        emulated=Opts.emulator is not None,
+    )
+    app.run()

@@ -1,0 +1,177 @@
+"""`kvp monitor` through Textual's pilot: live values, watch list, writes, lost connection."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+pytest.importorskip("textual")
+
+from textual.widgets import DataTable, Input
+
+from apps.monitor.app import MonitorApp
+from apps.monitor.dialogs import ConfirmDialog, InputDialog
+from apps.monitor.state import RobotState
+from apps.monitor.watchlist import WatchList
+from apps.names import is_motion_variable
+
+
+async def until(pilot: Any, cond: Callable[[], bool], timeout: float = 5.0) -> None:
+    loop = asyncio.get_running_loop()
+    end = loop.time() + timeout
+    while not cond():
+        if loop.time() > end:
+            raise AssertionError("condition not met in time")
+        await pilot.pause(0.05)
+
+
+def make_app(port: int, tmp_path: Path, **kw: Any) -> MonitorApp:
+    return MonitorApp(
+        "127.0.0.1", port, timeout=0.5, hz=10, watch_file=tmp_path / "watch.json", **kw
+    )
+
+
+def joints_text(app: MonitorApp) -> str:
+    return str(app.query_one("#joints").plain)  # type: ignore[attr-defined]
+
+
+async def test_values_appear_and_update(emulator: Any, tmp_path: Path) -> None:
+    app = make_app(emulator.port, tmp_path)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await until(pilot, lambda: app.state.updates > 0 and "-190…45" in joints_text(app))
+        assert "Nm" in joints_text(app)
+        assert app.state.pose.get("S") == 2 or app.state.pose  # pose arrived
+        assert app.state.override == 100
+        assert "connected" in app.status_text().plain
+
+        def moved() -> bool:  # re-set each time: a motion program may also drive $AXIS_ACT
+            emulator.store.set_system("$AXIS_ACT.A1", 12.5)
+            return "A1 12.50" in joints_text(app)
+
+        await until(pilot, moved)
+        emulator.store.set_system("$OV_PRO", 37)
+        await until(pilot, lambda: app.state.override == 37)
+        assert "override 37 %" in app.query_one("#program").plain  # type: ignore[attr-defined]
+        assert len(app.state.joint_history[0]) > 2  # the plots have history
+        await pilot.press("2")
+        await until(pilot, lambda: "12.5" in str(app.query_one("#joints-A1-label").render()))
+        await pilot.press("q")
+
+
+async def test_add_remove_watch_is_saved_and_restored(emulator: Any, tmp_path: Path) -> None:
+    app = make_app(emulator.port, tmp_path)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await until(pilot, lambda: app.state.updates > 0)
+        await pilot.press("a")
+        await until(pilot, lambda: isinstance(app.screen, InputDialog))
+        app.screen.query_one(Input).value = "$ov_jog"
+        await pilot.press("enter")
+        await until(pilot, lambda: app.state.watch.get("$ov_jog") == "100")
+        table = app.query_one("#watch-table", DataTable)
+        assert table.row_count == 3
+        saved = json.loads((tmp_path / "watch.json").read_text())
+        assert saved["watch"] == ["MYAXIS", "$OV_PRO", "$ov_jog"]
+        # remove the first row (MYAXIS)
+        table.move_cursor(row=0)
+        await pilot.press("d")
+        assert app.watchlist.names == ["$OV_PRO", "$ov_jog"]
+        assert json.loads((tmp_path / "watch.json").read_text())["watch"] == ["$OV_PRO", "$ov_jog"]
+    assert WatchList.load(tmp_path / "watch.json").names == ["$OV_PRO", "$ov_jog"]
+
+
+async def test_write_asks_before_a_motion_variable(emulator: Any, tmp_path: Path) -> None:
+    WatchList(tmp_path / "watch.json", ["MYINT", "MYAXIS"]).save()
+    app = make_app(emulator.port, tmp_path)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await until(pilot, lambda: app.state.watch.get("MYINT") == "0")
+        table = app.query_one("#watch-table", DataTable)
+        # a plain global: no confirmation
+        table.move_cursor(row=0)
+        await pilot.press("e")
+        await until(pilot, lambda: isinstance(app.screen, InputDialog))
+        assert app.screen.query_one(Input).value == "0"
+        app.screen.query_one(Input).value = "41"
+        await pilot.press("enter")
+        await until(pilot, lambda: emulator.store.read("MYINT") == "41")
+        await until(pilot, lambda: app.state.watch.get("MYINT") == "41")
+        # a motion variable: confirmation, "n" cancels
+        table.move_cursor(row=1)
+        await pilot.press("e")
+        await until(pilot, lambda: isinstance(app.screen, InputDialog))
+        app.screen.query_one(Input).value = "{A1 5.0}"
+        await pilot.press("enter")
+        await until(pilot, lambda: isinstance(app.screen, ConfirmDialog))
+        await pilot.press("n")
+        await pilot.pause(0.2)
+        assert emulator.store.read("MYAXIS.A1") == "0.0"
+        # ... and "y" writes
+        await pilot.press("e")
+        await until(pilot, lambda: isinstance(app.screen, InputDialog))
+        app.screen.query_one(Input).value = "{A1 5.0}"
+        await pilot.press("enter")
+        await until(pilot, lambda: isinstance(app.screen, ConfirmDialog))
+        await pilot.press("y")
+        await until(pilot, lambda: emulator.store.read("MYAXIS.A1") == "5.00000")
+
+
+async def test_lost_connection_is_shown_and_recovered(
+    emulator_factory: Any, tmp_path: Path
+) -> None:
+    emu = await emulator_factory()
+    port = emu.port
+    app = make_app(port, tmp_path)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await until(pilot, lambda: app.connected)
+        await emu.close()
+        await until(pilot, lambda: not app.connected)
+        assert "DISCONNECTED" in app.status_text().plain
+        await pilot.pause(0.3)
+        emu2 = await emulator_factory(port=port)
+        emu2.store.set_system("$OV_PRO", 61)
+        await until(pilot, lambda: app.connected and app.state.override == 61, timeout=8)
+        assert app.client.reconnects >= 1
+        assert "connected" in app.status_text().plain
+
+
+async def test_starts_without_a_proxy_and_keeps_retrying(tmp_path: Path) -> None:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    app = make_app(port, tmp_path)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await until(pilot, lambda: bool(app.last_error))
+        assert "DISCONNECTED" in app.status_text().plain and str(port) in app.status_text().plain
+
+
+def test_state_and_motion_list() -> None:
+    state = RobotState()
+    assert "$SOFTN_END[]" in state.names_to_read([])
+    assert state.names_to_read(["$OV_PRO", "X"])[-1] == "X"
+    assert is_motion_variable("MYAXIS") and is_motion_variable("mye6array[3].A1")
+    assert is_motion_variable("$OV_PRO") and not is_motion_variable("MYINT")
+
+
+def test_kvp_monitor_emulate_command_runs_in_80x24(tmp_path: Path) -> None:
+    """The real command in a pseudo-terminal: a live embedded robot, then q quits cleanly."""
+    import os
+    import sys
+
+    pexpect = pytest.importorskip("pexpect")
+    kvp = str(Path(sys.executable).with_name("kvp"))
+    env = {**os.environ, "KVP_MONITOR_FILE": str(tmp_path / "w.json"), "TERM": "xterm-256color"}
+    child = pexpect.spawn(
+        kvp, ["monitor", "--emulate"], env=env, encoding="utf-8", timeout=15, dimensions=(24, 80)
+    )
+    child.expect_exact("connected")
+    child.expect_exact("Nm")
+    child.send("q")
+    child.expect(pexpect.EOF)
+    child.close()
+    assert child.exitstatus == 0
