@@ -16,7 +16,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from .config import DEFAULT_PORT, DEFAULT_UDP_PORT, KNOWN_QUIRKS, EmulatorConfig
+from .config import DEFAULT_PORT, DEFAULT_UDP_PORT, KNOWN_QUIRKS, ROBOT_PROGRAMS, EmulatorConfig
 from .faults import Fault
 from .latency import PROFILES
 from .server import Emulator
@@ -84,6 +84,25 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="SPEC",
         help="inject a fault, KIND[:VALUE][@NTH][,conn=C][,count=K][,pause=S] (repeatable)",
     )
+    rob = parser.add_argument_group("simulated robot")
+    rob.add_argument(
+        "--program",
+        default="follow",
+        choices=ROBOT_PROGRAMS,
+        help="robot program the controller runs (default follow: LOOP PTP MYAXIS C_PTP)",
+    )
+    rob.add_argument(
+        "--speed", type=float, default=1.0, help="simulated time runs F times faster (default 1)"
+    )
+    rob.add_argument(
+        "--ipo", type=float, default=0.012, help="interpolation cycle, seconds (default 0.012)"
+    )
+    rob.add_argument(
+        "--noise", type=float, default=0.0, help="noise on $AXIS_ACT_MEAS, deg (default 0)"
+    )
+    rob.add_argument(
+        "--no-robot", dest="robot", action="store_false", help="static variables, no motion"
+    )
     parser.add_argument(
         "--log-level",
         default="warning",
@@ -109,6 +128,11 @@ def config_from_args(args: argparse.Namespace) -> EmulatorConfig:
         udp_reply_port=args.udp_reply_port,
         discovery=args.discovery,
         faults=tuple(Fault.parse(spec) for spec in args.fault),
+        robot=args.robot,
+        program=args.program,
+        speed=args.speed,
+        ipo=args.ipo,
+        noise=args.noise,
     )
 
 

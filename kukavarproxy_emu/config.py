@@ -15,13 +15,16 @@ from pyopenshowvar.protocol import MAX_FRAME
 from .faults import Fault
 from .latency import LatencyProfile, resolve_profile
 
-__all__ = ["DEFAULT_PORT", "KNOWN_QUIRKS", "EmulatorConfig"]
+__all__ = ["DEFAULT_PORT", "KNOWN_QUIRKS", "ROBOT_PROGRAMS", "EmulatorConfig"]
 
 DEFAULT_PORT = 7000
 DEFAULT_UDP_PORT = 6999
 #: ``legacy-ids``: pre-9.0 bug, every reply to one TCP read carries the first request's id.
 #: ``no-ping``: pre-9.0 proxies pass ``PING`` to CrossComm, so it reads as an unknown variable.
 KNOWN_QUIRKS = frozenset({"legacy-ids", "no-ping"})
+#: ``--program`` names (kept here so the config does not import numpy-heavy motion code;
+#: ``kukavarproxy_emu.motion.PROGRAMS`` has the same keys, a test checks it).
+ROBOT_PROGRAMS = ("follow", "actuator", "ext_move_axis", "joint_path", "cart_path", "none")
 
 
 @dataclass(frozen=True)
@@ -56,6 +59,16 @@ class EmulatorConfig:
     max_frame: int = MAX_FRAME
     #: Requests queued but not yet answered per connection before the socket stops being read.
     max_pending: int = 128
+    #: Simulate the robot (motion kernel + program + SPS); False = static variables only.
+    robot: bool = True
+    #: Robot program run by the simulated controller (see docs/emulator-robot.md).
+    program: str = "follow"
+    #: Simulated time runs this many times faster than wall time.
+    speed: float = 1.0
+    #: Interpolation cycle, simulated seconds (KRC4: 12 ms).
+    ipo: float = 0.012
+    #: Standard deviation (deg) of the noise on $AXIS_ACT_MEAS / $POS_ACT_MES; 0 = none.
+    noise: float = 0.0
 
     def __post_init__(self) -> None:
         if not 0 <= self.port <= 0xFFFF or not 0 <= self.udp_port <= 0xFFFF:
@@ -66,6 +79,12 @@ class EmulatorConfig:
             raise ValueError("max_clients and idle_timeout must be >= 0")
         if self.max_pending < 1 or self.max_frame < 8:
             raise ValueError("max_pending must be >= 1 and max_frame >= 8")
+        if self.program not in ROBOT_PROGRAMS:
+            raise ValueError(
+                f"unknown program {self.program!r} (known: {', '.join(ROBOT_PROGRAMS)})"
+            )
+        if not (self.speed > 0 and self.ipo > 0 and self.noise >= 0):
+            raise ValueError("speed and ipo must be > 0 and noise >= 0")
         unknown = set(self.quirks) - KNOWN_QUIRKS
         if unknown:
             raise ValueError(f"unknown quirks {sorted(unknown)} (known: {sorted(KNOWN_QUIRKS)})")

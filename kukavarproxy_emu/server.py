@@ -31,7 +31,7 @@ from collections import deque
 from dataclasses import dataclass
 from functools import partial
 from types import TracebackType
-from typing import Self
+from typing import TYPE_CHECKING, Self
 
 from pyopenshowvar.errors import ProtocolError
 from pyopenshowvar.protocol import (
@@ -47,6 +47,9 @@ from .faults import FaultSet, send_reply
 from .handler import Responder, build_store
 from .latency import ServiceQueue
 from .store import VariableStore
+
+if TYPE_CHECKING:
+    from .motion import Robot
 
 __all__ = ["ConnectionInfo", "Emulator", "Stats"]
 
@@ -323,6 +326,9 @@ class Emulator:
         self._last_index = 0
         self._idle_task: asyncio.Task[None] | None = None
         self._discovery: asyncio.DatagramTransport | None = None
+        #: The simulated robot (motion kernel, program, IPO clock) while started with
+        #: ``config.robot``; None otherwise.
+        self.robot: Robot | None = None
 
     @property
     def slow(self) -> bool:
@@ -347,8 +353,24 @@ class Emulator:
             self._idle_task = loop.create_task(self._watch_idle())
         if self.config.discovery_enabled:
             await self._start_discovery()
+        if self.config.robot:
+            self._start_robot()
         log.info("KUKAVARPROXY emulator listening on %s:%d", self.host, self.port)
         return self
+
+    def _start_robot(self) -> None:
+        from .motion import Robot  # imported late: numpy kinematics only when a robot runs
+
+        cfg = self.config
+        self.robot = Robot(
+            self.store,
+            program=cfg.program,
+            ipo=cfg.ipo,
+            speed=cfg.speed,
+            noise=cfg.noise,
+            seed=cfg.seed,
+        )
+        self.robot.start()
 
     async def _start_discovery(self) -> None:
         try:
@@ -372,6 +394,8 @@ class Emulator:
         if server is None:
             return
         server.close()
+        if self.robot is not None:
+            await self.robot.stop()
         if self._idle_task is not None:
             self._idle_task.cancel()
             self._idle_task = None

@@ -107,6 +107,11 @@ SYSTEM_VARIABLES: tuple[SysVar, ...] = (
     SysVar("$PRO_NAME1", "CHAR", (24,), init='""', doc="selected robot program"),
     SysVar("$PRO_NAME0", "CHAR", (24,), init='"SPS"', doc="submit program"),
     SysVar("$DRIVES_ON", "BOOL", init="TRUE"),
+    # TRUE while a stop message is active (the robot program was stopped by an error).
+    SysVar("$STOPMESS", "BOOL", init="FALSE"),
+    # Emulator only: text of the message that stopped the robot program ("" = none); see
+    # docs/emulator-robot.md. A KRC shows it on the smartPAD, which KVP cannot read.
+    SysVar("$EMU_MESSAGE", "CHAR", (128,), init='""', doc="last robot error message"),
     SysVar("$PERI_RDY", "BOOL", init="TRUE"),
     # $ALARM_STOP is active-low: TRUE means the emergency-stop circuit is closed (no alarm).
     SysVar("$ALARM_STOP", "BOOL", init="TRUE"),

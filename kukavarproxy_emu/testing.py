@@ -38,6 +38,7 @@ __all__ = [
     "emulator",
     "emulator_factory",
     "emulator_thread",
+    "fast_robot",
 ]
 
 #: The configuration every fixture starts from.
@@ -133,6 +134,12 @@ async def emulator_factory() -> AsyncIterator[EmulatorFactory]:
 @pytest_asyncio.fixture
 async def emulator(emulator_factory: EmulatorFactory) -> Emulator:
     return await emulator_factory()
+
+
+@pytest_asyncio.fixture
+async def fast_robot(emulator_factory: EmulatorFactory) -> Emulator:
+    """An emulator whose simulated robot runs 20× faster than real time (``speed=20``)."""
+    return await emulator_factory(speed=20.0)
 
 
 @pytest.fixture

@@ -175,7 +175,12 @@ async def test_outputs_through_global_array(kvp: Client) -> None:
     assert await kvp.read("OUTPUT_VARS[3]") == "TRUE"
     await kvp.set_outputs({1: True, 2: True, 3: False})
     assert [await kvp.read(f"OUTPUT_VARS[{i}]") for i in (1, 2, 3)] == ["TRUE", "TRUE", "FALSE"]
-    assert await kvp.read_output(1) is False  # $OUT follows only when an SPS copies it
+    # $OUT follows within one interpolation cycle: the emulator's SPS copies OUTPUT_VARS (Alg. 4.11)
+    for _ in range(100):
+        if await kvp.read_output(1):
+            break
+        await asyncio.sleep(0.005)
+    assert await kvp.read_output(1) is True
     with pytest.raises(WriteRefusedError):
         await kvp.write("$OUT[1]", True)
 

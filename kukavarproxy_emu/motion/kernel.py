@@ -1,0 +1,495 @@
+"""The motion kernel: joint state, planned motions, one interpolation cycle per :meth:`tick`.
+
+Programs (the thesis followers, path runners, later the KRL interpreter) call the planning
+methods (:meth:`MotionKernel.ptp`, :meth:`~MotionKernel.lin`, their ``_rel`` forms); the kernel
+neither knows nor cares how the program is written. Each :meth:`~MotionKernel.tick` advances
+the running segments by one IPO cycle and writes every motion variable of the store in one
+synchronous step, so a KVP read served by the same asyncio loop always sees one cycle.
+
+Model (see docs/emulator-robot.md):
+
+* planning at 100 % override; ``$OV_PRO`` scales the profile clock (speeds × ov, accelerations
+  × ov²), so an override change acts on the running motion too, slewed over ``OV_RAMP`` s;
+* approximation = superposition: the next segment starts while the current one decelerates
+  (``Segment.blend_start``) and the displacements add, which never exceeds a speed limit;
+* the torque is gravity (link masses + ``$LOAD``) + a diagonal inertia × commanded
+  acceleration + Jᵀ·``EMU_WRENCH``, all in the kinematics package's drive-torque convention.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import deque
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from pyopenshowvar.kinematics import (
+    KR6R900SIXX,
+    Load,
+    RobotModel,
+    UnreachableError,
+    fk_matrix,
+    forward,
+    gravity_torques,
+    inverse,
+    matrix_to_frame,
+    pose_to_matrix,
+    status_turn,
+    wrench_to_torques,
+)
+from pyopenshowvar.krl import E6Axis, E6Pos, Struct
+
+from ..store import VariableStore
+from .profiles import Trapezoid, ptp_profile, scalar_limits
+from .segments import FloatArray, Kind, Segment, rotation_log, rotvec_matrix
+
+__all__ = ["DEFAULT_INERTIA", "MotionKernel", "MotionRefused"]
+
+log = logging.getLogger(__name__)
+
+#: Diagonal inertia seen by each drive, kg·m² (rough, pose independent: the arm's links as
+#: point masses at mid reach for A1..A3, the wrist for A4..A6). Only the inertial *term* of
+#: $TORQUE_AXIS_ACT uses it, to show acceleration peaks; it is no dynamic model.
+DEFAULT_INERTIA = (2.0, 2.5, 0.7, 0.04, 0.04, 0.01)
+#: Seconds for the override to slew from 0 to 100 % while a motion runs (no speed jumps).
+OV_RAMP = 0.5
+#: KRC machine datum $APO_DIS_PTP (deg): 100 % C_PTP would start blending this far out.
+APO_DIS_PTP = 90.0
+#: A LIN is checked for reachability every this many mm (and degrees) at planning time.
+LIN_CHECK_STEP = 10.0
+#: A joint jump larger than this between two check points means a configuration flip.
+LIN_MAX_JUMP = 30.0
+#: External axes E1..E6 stay at zero (the KR 6 has none).
+_E6 = np.zeros(6)
+TraceSample = tuple[float, FloatArray, FloatArray]
+
+
+class MotionRefused(Exception):
+    """A motion the controller refuses (software limit, unreachable pose); text = message."""
+
+
+def _xyzabc(value: object, what: str) -> FloatArray:
+    if isinstance(value, Struct):
+        try:
+            return np.array([float(value[k]) for k in ("X", "Y", "Z", "A", "B", "C")])  # type: ignore[arg-type]
+        except (KeyError, TypeError):
+            raise MotionRefused(f"{what} is not a complete X, Y, Z, A, B, C value") from None
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.shape != (6,):
+        raise MotionRefused(f"{what} needs 6 values")
+    return arr
+
+
+def axes_of(value: object, what: str = "target") -> FloatArray:
+    """A1..A6 of an AXIS/E6AXIS struct (all six must be set) or a 6-sequence, as floats."""
+    if isinstance(value, Struct):
+        try:
+            return np.array([float(value[f"A{i}"]) for i in range(1, 7)])  # type: ignore[arg-type]
+        except (KeyError, TypeError):
+            raise MotionRefused(f"{what} is not a complete axis value (A1..A6)") from None
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.shape != (6,) or not np.all(np.isfinite(arr)):
+        raise MotionRefused(f"{what} needs 6 finite axis values")
+    return arr
+
+
+class MotionKernel:
+    """Owns the joint state and the queue of planned motions of one simulated robot."""
+
+    def __init__(
+        self,
+        store: VariableStore,
+        model: RobotModel = KR6R900SIXX,
+        *,
+        ipo: float = 0.012,
+        noise: float = 0.0,
+        seed: int | None = None,
+        inertia: Sequence[float] = DEFAULT_INERTIA,
+    ) -> None:
+        self.store = store
+        self.model = model
+        self.ipo = ipo
+        #: Standard deviation (deg) of the measurement noise on $AXIS_ACT_MEAS (0 = none).
+        self.noise = noise
+        self.inertia = np.asarray(inertia, dtype=np.float64)
+        self._rng = np.random.default_rng(seed)
+        q0 = axes_of(store.get("$AXIS_ACT"), "$AXIS_ACT")
+        self.q = q0.copy()
+        self.qd = np.zeros(6)  # deg/s
+        self.qdd = np.zeros(6)  # deg/s²
+        self.time = 0.0  # simulated seconds since start
+        self.ticks = 0
+        self.rate = 1.0  # profile clock rate = effective override
+        self.active: list[Segment] = []  # running; two while blending
+        self.pending: deque[Segment] = deque()  # planned by the advance run, not started
+        self.planned_q = q0.copy()  # end of the last planned motion (base of *_REL)
+        self._q_base = q0.copy()  # PTP: q = base + Σ delta·s
+        self._lin_base = np.eye(4)  # LIN: TCP pose in $BASE the running segments add to
+        self._frames: tuple[FloatArray, FloatArray] = (np.zeros(6), np.zeros(6))
+        #: Called with a message when a running motion must stop (IK failure during a LIN).
+        self.on_fault: Callable[[str], None] | None = None
+        #: Set to a list to record (time, q, qd) every cycle (tests, plots).
+        self.trace: list[TraceSample] | None = None
+        self._tcp = self._tcp_position(self.q)
+        self._has_wrench = "EMU_WRENCH" in store.names()
+        # The store already holds this state (HOME by default, with the reference's rounded
+        # torques): publish nothing until something observable changes.
+        self._published: tuple[object, ...] | None = self._key()
+
+    # --- state ------------------------------------------------------------------------------
+    @property
+    def moving(self) -> bool:
+        return bool(self.active or self.pending)
+
+    @property
+    def queued(self) -> int:
+        """Motions planned but not started (the advance run's look-ahead)."""
+        return len(self.pending)
+
+    def can_plan(self, advance: int) -> bool:
+        """Whether the advance run may plan another motion with ``$ADVANCE = advance``.
+
+        With nothing running the main run itself needs one; otherwise up to ``advance``
+        motions may wait behind the executing one (0: plan only when the robot stopped).
+        """
+        # With nothing running, the first pending motion is the one the main run executes next.
+        ahead = len(self.pending) if self.active else len(self.pending) - 1
+        return ahead < max(advance, 0)
+
+    # --- planning (called by programs) -----------------------------------------------------
+    def _limits(self) -> tuple[FloatArray, FloatArray]:
+        vel = self._percent("$VEL_AXIS")
+        acc = self._percent("$ACC_AXIS")
+        return self.model.max_speed * vel, self.model.max_accel * acc
+
+    def _percent(self, name: str) -> FloatArray:
+        values = self.store.get(name)
+        assert isinstance(values, list)
+        # 0 % would mean "never arrive": a KRC refuses it, we treat it as 1 %.
+        return np.array([max(float(v), 1.0) for v in values[:6]]) / 100.0  # type: ignore[arg-type]
+
+    def _soft_limits(self) -> tuple[FloatArray, FloatArray]:
+        lo, hi = self.store.get("$SOFTN_END"), self.store.get("$SOFTP_END")
+        assert isinstance(lo, list) and isinstance(hi, list)
+        return np.array(lo[:6], dtype=np.float64), np.array(hi[:6], dtype=np.float64)
+
+    def check_limits(self, q: FloatArray, what: str) -> None:
+        """Raise :class:`MotionRefused` like a KRC when ``q`` is outside the software limits."""
+        lo, hi = self._soft_limits()
+        for i in range(6):
+            if q[i] > hi[i] + 1e-9:
+                raise MotionRefused(
+                    f"Software limit switch +A{i + 1}: {what} A{i + 1} {q[i]:g} > {hi[i]:g}"
+                )
+            if q[i] < lo[i] - 1e-9:
+                raise MotionRefused(
+                    f"Software limit switch -A{i + 1}: {what} A{i + 1} {q[i]:g} < {lo[i]:g}"
+                )
+
+    def _apo(self) -> Struct:
+        apo = self.store.get("$APO")
+        assert isinstance(apo, Struct)
+        return apo
+
+    def _read_frames(self) -> tuple[FloatArray, FloatArray]:
+        tool, base = self.store.get("$TOOL"), self.store.get("$BASE")
+        return _xyzabc(tool, "$TOOL"), _xyzabc(base, "$BASE")
+
+    def ptp(self, target: object, *, approx: bool = False, label: str = "PTP") -> None:
+        """Plan ``PTP target [C_PTP]`` to an axis value (struct or 6 numbers, deg)."""
+        q1 = axes_of(target, label)
+        delta = q1 - self.planned_q
+        if not self.active and not self.pending and np.all(np.abs(delta) < 1e-9):
+            return  # the robot stands on the target: the statement completes at once
+        self.check_limits(q1, label)
+        v, a = self._limits()
+        cptp = float(self._apo()["CPTP"])  # type: ignore[arg-type]
+        lead = float(np.max(np.abs(delta))) if np.any(delta) else 0.0
+        # $APO.CPTP % of $APO_DIS_PTP, at most half the segment (reference §5).
+        frac = min(0.5, cptp / 100.0 * APO_DIS_PTP / lead) if lead > 0 else 0.0
+        seg = Segment(Kind.PTP, ptp_profile(delta, v, a), delta, q1, approx, frac, label=label)
+        self._enqueue(seg)
+
+    def ptp_rel(self, delta: object, *, approx: bool = False, label: str = "PTP_REL") -> None:
+        """Plan ``PTP_REL`` by an axis increment, added to the previous planned end point."""
+        self.ptp(self.planned_q + axes_of(delta, label), approx=approx, label=label)
+
+    def ptp_pose(
+        self,
+        pose: object,
+        *,
+        s: int | None = None,
+        t: int | None = None,
+        approx: bool = False,
+        label: str = "PTP",
+    ) -> None:
+        """Plan a PTP to a Cartesian pose (TCP in $BASE): the KRC resolves it with IK."""
+        self._frames = self._read_frames()
+        try:
+            q1 = inverse(
+                self.model,
+                _xyzabc(pose, label),
+                s=s,
+                t=t,
+                current=self.planned_q,
+                tool=self._frames[0],
+                base=self._frames[1],
+            )
+        except UnreachableError as exc:
+            raise MotionRefused(f"{label}: target not reachable: {exc}") from None
+        self.ptp(q1, approx=approx, label=label)
+
+    def planned_pose(self) -> FloatArray:
+        """The TCP pose (XYZABC in $BASE) at the end of the last planned motion."""
+        tool, base = self._read_frames()
+        return np.asarray(forward(self.model, self.planned_q, tool, base), dtype=np.float64)
+
+    def rel_pose(self, increment: object) -> FloatArray:
+        """Planned end pose moved by a Cartesian increment: X/Y/Z added in $BASE, and the
+        rotation Rz(A)·Ry(B)·Rx(C) applied about the $BASE axes at the TCP."""
+        inc = _xyzabc(increment, "increment")
+        start = pose_to_matrix(self.planned_pose())
+        rot = pose_to_matrix(np.array([0.0, 0.0, 0.0, *inc[3:]]))
+        end = start.copy()
+        end[:3, :3] = rot[:3, :3] @ start[:3, :3]
+        end[:3, 3] += inc[:3]
+        return np.asarray(matrix_to_frame(end), dtype=np.float64)
+
+    def ptp_rel_pose(
+        self, increment: object, *, approx: bool = False, label: str = "PTP_REL"
+    ) -> None:
+        """``PTP_REL`` by a POS/FRAME increment (Algorithm 4.12's ``PTP_REL MYPOS``)."""
+        inc = _xyzabc(increment, label)
+        if not self.active and not self.pending and not np.any(inc):
+            return
+        self.ptp_pose(self.rel_pose(inc), approx=approx, label=label)
+
+    def lin(self, pose: object, *, approx: bool = False, label: str = "LIN") -> None:
+        """Plan ``LIN pose [C_DIS]``: a straight TCP line in $BASE at ``$VEL.CP``."""
+        tool, base = self._frames = self._read_frames()
+        start = fk_matrix(self.model, self.planned_q, tool, base)
+        end = pose_to_matrix(_xyzabc(pose, label))
+        dp = end[:3, 3] - start[:3, 3]
+        rv = rotation_log(end[:3, :3] @ start[:3, :3].T)
+        length, angle = float(np.linalg.norm(dp)), math.degrees(float(np.linalg.norm(rv)))
+        if not self.active and not self.pending and length < 1e-9 and angle < 1e-9:
+            return
+        end_q = self._check_line(start, dp, rv, length, angle, label)
+        vel, acc = self.store.get("$VEL"), self.store.get("$ACC")
+        assert isinstance(vel, Struct) and isinstance(acc, Struct)
+        v = [float(vel["CP"]) * 1000.0, float(vel["ORI1"])]  # type: ignore[arg-type]
+        a = [float(acc["CP"]) * 1000.0, float(acc["ORI1"])]  # type: ignore[arg-type]
+        profile = Trapezoid.plan(*scalar_limits([length, angle], v, a))
+        cdis = float(self._apo()["CDIS"])  # type: ignore[arg-type]
+        frac = min(0.5, cdis / length) if length > 0 else 0.0
+        seg = Segment(Kind.LIN, profile, dp, end_q, approx, frac, rv, label)
+        self._enqueue(seg)
+
+    def lin_rel(self, increment: object, *, approx: bool = False, label: str = "LIN_REL") -> None:
+        """``LIN_REL`` by a Cartesian increment from the previous planned end point."""
+        self.lin(self.rel_pose(increment), approx=approx, label=label)
+
+    def _check_line(
+        self,
+        start: FloatArray,
+        dp: FloatArray,
+        rv: FloatArray,
+        length: float,
+        angle: float,
+        label: str,
+    ) -> FloatArray:
+        """IK along the line at planning time: refuse a LIN that leaves the workspace or the
+        software limits, or flips configuration (a singularity) on the way."""
+        n = max(2, min(200, int(max(length, angle) / LIN_CHECK_STEP) + 2))
+        q = self.planned_q
+        for s in np.linspace(0.0, 1.0, n)[1:]:
+            pose = self._lin_pose(start, [(dp, rv, float(s))])
+            try:
+                q_next = inverse(
+                    self.model, pose, current=q, tool=self._frames[0], base=self._frames[1]
+                )
+            except UnreachableError as exc:
+                raise MotionRefused(f"{label}: path not reachable at {s:.0%}: {exc}") from None
+            if np.any(np.abs(q_next - q) > LIN_MAX_JUMP):
+                raise MotionRefused(f"{label}: path crosses a singularity near {s:.0%}")
+            q = q_next
+        self.check_limits(q, label)
+        return q
+
+    @staticmethod
+    def _lin_pose(
+        base: FloatArray, parts: list[tuple[FloatArray, FloatArray, float]]
+    ) -> FloatArray:
+        pose = base.copy()
+        for dp, rv, s in parts:
+            pose[:3, 3] += dp * s
+            pose[:3, :3] = rotvec_matrix(rv * s) @ pose[:3, :3]
+        return pose
+
+    def _enqueue(self, seg: Segment) -> None:
+        self.pending.append(seg)
+        self.planned_q = seg.end_q.copy()
+
+    def stop(self, *, hard: bool = False) -> None:
+        """Forget the planned motions; the running ones end exactly (``hard``: at once)."""
+        self.pending.clear()
+        for seg in self.active:
+            seg.approx = False
+        if hard:
+            self.active.clear()
+            self._q_base = self.q.copy()
+        self.planned_q = self.active[-1].end_q.copy() if self.active else self.q.copy()
+
+    # --- the interpolation cycle -----------------------------------------------------------
+    def tick(self) -> None:
+        """Advance one IPO cycle and publish the new state to the store."""
+        dt = self.ipo
+        ov = self.store.get("$OV_PRO")
+        target = float(ov) / 100.0  # type: ignore[arg-type]
+        if self.active:  # slew: an override step must not become a speed step
+            step = dt / OV_RAMP
+            self.rate += max(-step, min(step, target - self.rate))
+        else:
+            self.rate = target
+        q_old = self.q
+        self._advance(dt * self.rate)
+        q_new = self._position()
+        qd = (q_new - q_old) / dt
+        self.qdd = (qd - self.qd) / dt
+        self.qd, self.q = qd, q_new
+        self.time += dt
+        self.ticks += 1
+        if self.trace is not None:
+            self.trace.append((self.time, q_new.copy(), qd.copy()))
+        self.publish()
+
+    def _start_next(self, carry: float, budget: float) -> bool:
+        if not self.pending:
+            return False
+        nxt = self.pending[0]
+        if self.active:
+            last = self.active[-1]
+            if len(self.active) > 1 or last.kind is not nxt.kind:
+                return False
+            start = last.blend_start(nxt)
+            if last.t < start:
+                return False
+            nxt.t = min(last.t - start, budget)
+        else:
+            nxt.t = carry
+            if nxt.kind is Kind.LIN:
+                self._lin_base = fk_matrix(self.model, self.q, *self._frames)
+        self.pending.popleft()
+        self.active.append(nxt)
+        return True
+
+    def _advance(self, budget: float) -> None:
+        self._start_next(0.0, budget)
+        for seg in self.active:
+            seg.t += budget
+        for _ in range(64):  # bounded: zero-length segments retire immediately
+            carry = 0.0
+            finished = [seg for seg in self.active if seg.done]
+            for seg in finished:
+                carry = max(carry, seg.t - seg.duration)
+                self.active.remove(seg)
+                if seg.kind is Kind.PTP:
+                    self._q_base = self._q_base + seg.delta
+                else:
+                    self._lin_base = self._lin_pose(self._lin_base, [(seg.delta, seg.rotvec, 1.0)])
+                    self._q_base = seg.end_q.copy()
+            if not self.active and not finished:
+                carry = 0.0
+            if not self._start_next(carry, budget) and not finished:
+                break
+        if not self.active:
+            self._q_base = self.planned_q.copy() if not self.pending else self._q_base
+
+    def _position(self) -> FloatArray:
+        if not self.active:
+            return self._q_base.copy()
+        if self.active[0].kind is Kind.PTP:
+            q = self._q_base.copy()
+            for seg in self.active:
+                q += seg.delta * seg.profile.s(seg.t)
+            return q
+        parts = [(seg.delta, seg.rotvec, seg.profile.s(seg.t)) for seg in self.active]
+        pose = self._lin_pose(self._lin_base, parts)
+        try:
+            q = inverse(
+                self.model, pose, current=self.q, tool=self._frames[0], base=self._frames[1]
+            )
+            self.check_limits(q, "LIN")
+        except (UnreachableError, MotionRefused) as exc:
+            self.stop(hard=True)
+            if self.on_fault is not None:
+                self.on_fault(f"LIN stopped: {exc}")
+            return self.q.copy()
+        return np.asarray(q, dtype=np.float64)
+
+    # --- publishing ------------------------------------------------------------------------
+    def _tcp_position(self, q: FloatArray) -> FloatArray:
+        return np.asarray(fk_matrix(self.model, q)[:3, 3], dtype=np.float64)
+
+    def _load(self) -> Load | None:
+        load = self.store.get("$LOAD")
+        if not isinstance(load, Struct):
+            return None
+        mass = float(load.get("M") or 0.0)  # type: ignore[arg-type]
+        cm = load.get("CM")
+        com = (0.0, 0.0, 0.0)
+        if isinstance(cm, Struct):
+            com = tuple(float(cm.get(k) or 0.0) for k in "XYZ")  # type: ignore[assignment,arg-type]
+        return Load(mass, com) if mass > 0.0 else None
+
+    def wrench(self) -> FloatArray:
+        """The external wrench EMU_WRENCH (N, Nm; TCP, $ROBROOT axes), zeros if undeclared."""
+        if not self._has_wrench:
+            return np.zeros(6)
+        w = self.store.get("EMU_WRENCH")
+        if not isinstance(w, Struct):
+            return np.zeros(6)
+        return np.array([float(w.get(k) or 0.0) for k in ("FX", "FY", "FZ", "MX", "MY", "MZ")])  # type: ignore[arg-type]
+
+    def _key(self) -> tuple[object, ...]:
+        """Everything the published variables depend on."""
+        tool, base = self.store.get("$TOOL"), self.store.get("$BASE")
+        load, wrench = (
+            self.store.get("$LOAD"),
+            self.store.get("EMU_WRENCH") if self._has_wrench else None,
+        )
+        return (self.q.tobytes(), self.qd.tobytes(), self.qdd.tobytes(), tool, base, load, wrench)
+
+    def publish(self, *, force: bool = False) -> None:
+        """Write the motion variables, skipping the write when nothing observable changed
+        (at rest the store's read cache stays valid and HOME keeps its original text)."""
+        key = self._key()
+        if not force and key == self._published and not self.noise:
+            return
+        self._published = key
+        tool, base = self._read_frames()
+        wrench = self.wrench()
+        model, q = self.model, self.q
+        q_meas = q + self._rng.normal(0.0, self.noise, 6) if self.noise else q
+        torque = gravity_torques(model, q, self._load())
+        torque = torque + model.torque_sign * self.inertia * np.radians(self.qdd)
+        if np.any(wrench):
+            torque = torque + wrench_to_torques(model, q, wrench, tool)
+        tcp = self._tcp_position(q)
+        vel_tcp = float(np.linalg.norm(tcp - self._tcp)) / self.ipo / 1000.0
+        self._tcp = tcp
+        store = self.store
+        store.set_system("$AXIS_ACT", E6Axis.from_numpy(np.concatenate([q, _E6])))
+        store.set_system("$AXIS_ACT_MEAS", E6Axis.from_numpy(np.concatenate([q_meas, _E6])))
+        store.set_system("$POS_ACT", self._pos(q, tool, base))
+        store.set_system("$POS_ACT_MES", self._pos(q_meas, tool, base))
+        store.set_system("$VEL_AXIS_ACT", [*(self.qd / model.max_speed * 100.0), *_E6])
+        store.set_system("$TORQUE_AXIS_ACT", [*torque, *_E6])
+        store.set_system("$VEL_ACT", vel_tcp)
+
+    def _pos(self, q: FloatArray, tool: FloatArray, base: FloatArray) -> E6Pos:
+        s, t = status_turn(self.model, q)
+        xyzabc = forward(self.model, q, tool, base)
+        return E6Pos.from_numpy(np.concatenate([xyzabc, _E6]), s=int(s), t=int(t))

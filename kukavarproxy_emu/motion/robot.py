@@ -1,0 +1,153 @@
+"""The simulated robot task: IPO clock + program + SPS + motion kernel, owned by the Emulator.
+
+Each tick, in this order and without awaiting in between (so a KVP read, served on the same
+event loop, always sees one whole cycle): acknowledge ``EMU_RESTART``; the robot program's
+advance run plans motions; the SPS copies OUTPUT_VARS to $OUT; the kernel interpolates one
+cycle and publishes $AXIS_ACT, $POS_ACT, $TORQUE_AXIS_ACT, ...
+
+**Errors.** A refused motion (software limit switch, unreachable pose, uninitialised target)
+stops the program like a KRC: the refused motion never starts, the one already running ends
+exactly on its (valid) end point, ``$PRO_STATE1`` = ``#P_STOP``, ``$STOPMESS`` = TRUE and the
+message text is in the read-only ``$EMU_MESSAGE[]``. Writing ``EMU_RESTART = TRUE`` (or
+:meth:`Robot.restart`) acknowledges the message and starts the program again.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+from pyopenshowvar.kinematics import KR6R900SIXX, RobotModel
+from pyopenshowvar.krl import KrlEnum, Struct
+
+from ..store import VariableStore
+from .clock import IpoClock, JitterStats
+from .kernel import MotionKernel, MotionRefused
+from .programs import Idle, Program, Sps, make_program
+
+__all__ = ["MESSAGE_LENGTH", "Robot"]
+
+log = logging.getLogger(__name__)
+
+#: Characters of ``$EMU_MESSAGE[]`` (longer messages are cut).
+MESSAGE_LENGTH = 128
+_WRENCH = ("FX", "FY", "FZ", "MX", "MY", "MZ")
+
+
+class Robot:
+    """One simulated KR 6 R900 sixx: ``emu.robot`` while an emulator runs with ``robot=True``."""
+
+    def __init__(
+        self,
+        store: VariableStore,
+        *,
+        program: str | Program = "follow",
+        ipo: float = 0.012,
+        speed: float = 1.0,
+        model: RobotModel = KR6R900SIXX,
+        noise: float = 0.0,
+        seed: int | None = None,
+    ) -> None:
+        self.store = store
+        self.kernel = MotionKernel(store, model, ipo=ipo, noise=noise, seed=seed)
+        self.kernel.on_fault = self.fault
+        self.program = make_program(program) if isinstance(program, str) else program
+        self.sps = Sps(store)
+        self.clock = IpoClock(self.tick, ipo=ipo, speed=speed)
+        #: True while the robot program runs (False after a stop or with no program).
+        self.running = False
+        #: The last error message ("" when none).
+        self.message = ""
+
+    # --- life cycle --------------------------------------------------------------------------
+    def start(self) -> None:
+        """Select and start the program and start the IPO clock (on the running loop)."""
+        self._begin()
+        self.clock.start()
+
+    async def stop(self) -> None:
+        await self.clock.stop()
+
+    def _begin(self) -> None:
+        self._set("$PRO_NAME1[]", self.program.krl_name)
+        self._set("$DRIVES_ON", True)
+        idle = isinstance(self.program, Idle)
+        self.running = not idle
+        if not idle:
+            try:
+                self.program.start(self.kernel)
+            except MotionRefused as exc:
+                self.fault(str(exc))
+                return
+        self._set("$PRO_STATE1", KrlEnum("P_FREE" if idle else "P_ACTIVE"))
+
+    def tick(self) -> None:
+        """One interpolation cycle (the clock calls it; tests may call it directly)."""
+        self._check_restart()
+        if self.running:
+            try:
+                self.program.step(self.kernel)
+            except MotionRefused as exc:
+                self.fault(str(exc))
+        self.sps.step()
+        self.kernel.tick()
+
+    # --- errors ------------------------------------------------------------------------------
+    def fault(self, message: str) -> None:
+        """Stop the program with ``message`` (refused motion): see the module docstring."""
+        log.warning("robot program stopped: %s", message)
+        self.kernel.stop()
+        self.running = False
+        self.message = message
+        text = message.encode("latin-1", "replace").decode("latin-1")[:MESSAGE_LENGTH]
+        self._set("$EMU_MESSAGE[]", text.replace('"', "'"))
+        self._set("$STOPMESS", True)
+        self._set("$PRO_STATE1", KrlEnum("P_STOP"))
+
+    def restart(self) -> None:
+        """Acknowledge the message and start the program again (from the current position)."""
+        self.message = ""
+        self._set("$EMU_MESSAGE[]", "")
+        self._set("$STOPMESS", False)
+        self._begin()
+
+    def _check_restart(self) -> None:
+        try:
+            flag = self.store.get("EMU_RESTART")
+        except LookupError:
+            return
+        if flag is True:
+            self.store.set_system("EMU_RESTART", False)
+            self.restart()
+
+    # --- in-process API ----------------------------------------------------------------------
+    def apply_wrench(self, wrench: Sequence[float]) -> None:
+        """Set the external wrench [FX, FY, FZ (N), MX, MY, MZ (Nm)] the TCP exerts on the
+        environment ($ROBROOT axes, about the TCP); it is also the variable EMU_WRENCH."""
+        values = [float(v) for v in wrench]
+        if len(values) != 6 or not all(np.isfinite(values)):
+            raise ValueError("a wrench is 6 finite numbers: FX FY FZ MX MY MZ")
+        self.store.set_system("EMU_WRENCH", Struct(None, dict(zip(_WRENCH, values, strict=True))))
+
+    @property
+    def time(self) -> float:
+        """Simulated seconds since the robot started."""
+        return self.kernel.time
+
+    @property
+    def q(self) -> npt.NDArray[np.float64]:
+        """Current set-point axes A1..A6 (deg)."""
+        return self.kernel.q.copy()
+
+    def jitter(self) -> JitterStats:
+        """IPO tick lateness statistics (see :class:`~.clock.IpoClock`)."""
+        return self.clock.stats()
+
+    def _set(self, name: str, value: object) -> None:
+        try:
+            self.store.set_system(name, value)
+        except LookupError:  # a store built without that variable: nothing to report into
+            log.debug("robot: no variable %s in the store", name)
