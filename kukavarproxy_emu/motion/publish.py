@@ -1,0 +1,115 @@
+"""Publishing one interpolation cycle: the motion variables the KRC updates every 12 ms.
+
+Split from the kernel so the planning code and the "what does a client read" code stay small.
+:class:`Publisher` is mixed into :class:`~kukavarproxy_emu.motion.kernel.MotionKernel`; it
+writes ``$AXIS_ACT``, ``$AXIS_ACT_MEAS``, ``$POS_ACT``, ``$POS_ACT_MES``, ``$VEL_AXIS_ACT``,
+``$TORQUE_AXIS_ACT`` and ``$VEL_ACT`` in one synchronous step, and skips the write when nothing
+observable changed (at rest the store's read cache stays valid and HOME keeps its exact text).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pyopenshowvar.kinematics import (
+    Load,
+    RobotModel,
+    fk_matrix,
+    forward,
+    gravity_torques,
+    status_turn,
+    wrench_to_torques,
+)
+from pyopenshowvar.krl import E6Axis, E6Pos, Struct
+
+from ..store import VariableStore
+from .segments import FloatArray
+
+__all__ = ["Publisher"]
+
+#: External axes E1..E6 stay at zero (the KR 6 has none).
+_E6 = np.zeros(6)
+
+
+class Publisher:
+    """The variable-writing half of the motion kernel (state lives in the kernel)."""
+
+    store: VariableStore
+    model: RobotModel
+    ipo: float
+    noise: float
+    inertia: FloatArray
+    q: FloatArray
+    qd: FloatArray
+    qdd: FloatArray
+    _rng: np.random.Generator
+    _tcp: FloatArray
+    _has_wrench: bool
+    _published: tuple[object, ...] | None
+
+    def _read_frames(self) -> tuple[FloatArray, FloatArray]:
+        raise NotImplementedError  # provided by the kernel
+
+    def _tcp_position(self, q: FloatArray) -> FloatArray:
+        return np.asarray(fk_matrix(self.model, q)[:3, 3], dtype=np.float64)
+
+    def _load(self) -> Load | None:
+        load = self.store.get("$LOAD")
+        if not isinstance(load, Struct):
+            return None
+        mass = float(load.get("M") or 0.0)  # type: ignore[arg-type]
+        cm = load.get("CM")
+        com = (0.0, 0.0, 0.0)
+        if isinstance(cm, Struct):
+            com = tuple(float(cm.get(k) or 0.0) for k in "XYZ")  # type: ignore[assignment,arg-type]
+        return Load(mass, com) if mass > 0.0 else None
+
+    def wrench(self) -> FloatArray:
+        """The external wrench EMU_WRENCH (N, Nm; TCP, $ROBROOT axes), zeros if undeclared."""
+        if not self._has_wrench:
+            return np.zeros(6)
+        w = self.store.get("EMU_WRENCH")
+        if not isinstance(w, Struct):
+            return np.zeros(6)
+        return np.array([float(w.get(k) or 0.0) for k in ("FX", "FY", "FZ", "MX", "MY", "MZ")])  # type: ignore[arg-type]
+
+    def _key(self) -> tuple[object, ...]:
+        """Everything the published variables depend on."""
+        tool, base = self.store.get("$TOOL"), self.store.get("$BASE")
+        load, wrench = (
+            self.store.get("$LOAD"),
+            self.store.get("EMU_WRENCH") if self._has_wrench else None,
+        )
+        return (self.q.tobytes(), self.qd.tobytes(), self.qdd.tobytes(), tool, base, load, wrench)
+
+    def publish(self, *, force: bool = False) -> None:
+        """Write the motion variables, skipping the write when nothing observable changed
+        (at rest the store's read cache stays valid and HOME keeps its original text)."""
+        key = self._key()
+        if not force and key == self._published and not self.noise:
+            return
+        self._published = key
+        tool, base = self._read_frames()
+        wrench = self.wrench()
+        model, q = self.model, self.q
+        q_meas = q + self._rng.normal(0.0, self.noise, 6) if self.noise else q
+        torque = gravity_torques(model, q, self._load())
+        torque = torque + model.torque_sign * self.inertia * np.radians(self.qdd)
+        if np.any(wrench):
+            torque = torque + wrench_to_torques(model, q, wrench, tool)
+        tcp = self._tcp_position(q)
+        vel_tcp = float(np.linalg.norm(tcp - self._tcp)) / self.ipo / 1000.0
+        self._tcp = tcp
+        store = self.store
+        store.set_system("$AXIS_ACT", E6Axis.from_numpy(np.concatenate([q, _E6])))
+        store.set_system("$AXIS_ACT_MEAS", E6Axis.from_numpy(np.concatenate([q_meas, _E6])))
+        store.set_system("$POS_ACT", self._pos(q, tool, base))
+        store.set_system("$POS_ACT_MES", self._pos(q_meas, tool, base))
+        store.set_system("$VEL_AXIS_ACT", [*(self.qd / model.max_speed * 100.0), *_E6])
+        store.set_system("$TORQUE_AXIS_ACT", [*torque, *_E6])
+        store.set_system("$VEL_ACT", vel_tcp)
+
+    def _pos(self, q: FloatArray, tool: FloatArray, base: FloatArray) -> E6Pos:
+        s, t = status_turn(self.model, q)
+        xyzabc = forward(self.model, q, tool, base)
+        return E6Pos.from_numpy(np.concatenate([xyzabc, _E6]), s=int(s), t=int(t))
