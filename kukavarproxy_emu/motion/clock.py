@@ -67,6 +67,10 @@ class IpoClock:
         #: Lateness of the most recent ticks (s), for the jitter benchmark.
         self.jitter: deque[float] = deque(maxlen=keep)
         self._task: asyncio.Task[None] | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._start = 0.0
+        self._n = 0
+        self._deadline = float("inf")
 
     @property
     def period(self) -> float:
@@ -90,31 +94,50 @@ class IpoClock:
             except asyncio.CancelledError:
                 pass
 
+    def poll(self) -> None:
+        """Run the tick now if it is due.
+
+        The server calls this before answering each batch of requests: under load from many
+        clients one event-loop pass answers every client before the timer callback gets its
+        turn, so the tick would wait behind all of them. Polling here bounds the lateness by one
+        client's batch instead.
+        """
+        if self._loop is not None and self._loop.time() >= self._deadline:
+            self._tick(self._loop.time())
+
+    def _tick(self, now: float) -> None:
+        late = now - self._deadline
+        if late > MAX_BEHIND:
+            self.overruns += 1
+            log.warning("IPO clock %.0f ms behind; skipping ticks", late * 1e3)
+            self._start, self._n = now, 0
+        self.jitter.append(max(late, 0.0))
+        self.ticks += 1
+        self._n += 1
+        self._deadline = self._start + self._n * self.period
+        try:
+            self.callback()
+        except Exception:  # a bug in one tick must not stop the robot's clock for good
+            log.exception("IPO tick failed")
+
     async def _run(self) -> None:
         loop = asyncio.get_running_loop()
-        period = self.period
-        start = loop.time()
-        n = 0
-        while True:
-            n += 1
-            deadline = start + n * period
-            delay = deadline - loop.time()
-            if delay > 0:
-                await asyncio.sleep(delay)
-            now = loop.time()
-            late = now - deadline
-            if late > MAX_BEHIND:
-                self.overruns += 1
-                log.warning("IPO clock %.0f ms behind; skipping ticks", late * 1e3)
-                start, n = now, 0
-            self.jitter.append(max(late, 0.0))
-            self.ticks += 1
-            try:
-                self.callback()
-            except Exception:  # a bug in one tick must not stop the robot's clock for good
-                log.exception("IPO tick failed")
-            if delay <= 0:
-                await asyncio.sleep(0)  # catching up: still let the server answer requests
+        self._start = loop.time()
+        self._n = 1
+        self._deadline = self._start + self.period
+        self._loop = loop
+        try:
+            while True:
+                delay = self._deadline - loop.time()
+                if delay > 0:
+                    await asyncio.sleep(delay)
+                now = loop.time()
+                if now >= self._deadline:  # poll() may have run this tick already
+                    self._tick(now)
+                if self._deadline <= loop.time():
+                    await asyncio.sleep(0)  # catching up: still let the server answer requests
+        finally:
+            self._loop = None
 
     def stats(self) -> JitterStats:
         """p50 / p99 / max / mean lateness of the recorded ticks."""
