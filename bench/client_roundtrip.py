@@ -1,82 +1,281 @@
-"""Client round-trip benchmark against an emulator in a separate process (latency ``none``).
+"""Client benchmark: our asyncio client against py-openshowvar and JOpenShowVar-style access.
 
-Prints the serial read round-trip time (one request in flight, like JOpenShowVar) and the
-pipelined read throughput of ``read_many``. Run::
+The emulator runs in a separate process (``bench/_emu_server.py``, same options as
+``kukavarproxy-emu``). Figures, each the median of ``--repeat`` runs, ours and the peer's
+measured alternately in the same run:
 
-    .venv/bin/python bench/client_roundtrip.py [--reads 5000] [--repeat 5]
+1. serial read round trip of ``$AXIS_ACT`` (one request in flight), latency ``none``:
+   ``Client.read`` vs ``py_openshowvar.openshowvar(ip, port).read(name, debug=False)``;
+2. 100 variables (``MYE6ARRAY[1..100]``) in one ``read_many`` vs a loop of 100 py-openshowvar
+   reads, latency ``none``;
+3. ``read_joint_torques()`` vs six sequential element reads ``$TORQUE_AXIS_ACT[1..6]`` (what
+   JOpenShowVar's ``readJointTorques`` does), our client for both, latency profile ``kvp``
+   (seeded);
+4. a read-modify-write control cycle (read ``$AXIS_ACT``, compute, write ``MYAXIS``) at the
+   ``kvp`` profile vs the limit its service times allow: one worker serialises every request,
+   so the best possible rate is 1 / (mean read + mean write service time, stalls included).
 
-Numbers are medians over ``--repeat`` runs. This is a benchmark, not a test: it never fails on a
-slow machine.
+Run::
+
+    .venv/bin/python bench/client_roundtrip.py [--quick] [--repeat 5] [--json out.json]
 """
 
 from __future__ import annotations
 
-import argparse
 import asyncio
-import platform
-import statistics
-import subprocess
+import math
 import sys
 import time
+from pathlib import Path
+from typing import Any
 
-from pyopenshowvar import Client
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from _common import EmuProcess, Row, base_parser, median, print_rows, write_json
+
+from kukavarproxy_emu.latency import PROFILES, LatencyProfile
+from pyopenshowvar import Client, parse_value
+
+try:
+    import py_openshowvar
+except ImportError:  # optional peer (the `test` and `bench` extras install it)
+    py_openshowvar = None
+
+SEED = 1
+E6AXIS_TEXT = "{E6AXIS: A1 10.5, A2 -80.25, A3 95.125, A4 0.0, A5 30.0, A6 -12.5, E1 0.0, E2 0.0, E3 0.0, E4 0.0, E5 0.0, E6 0.0}"
 
 
-def start_emulator() -> tuple[subprocess.Popen[str], int]:
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "kukavarproxy_emu", "--port", "0", "--latency", "none", "--log-level", "warning"],
-        stdout=subprocess.PIPE,
-        text=True,
-    )
-    assert proc.stdout is not None
-    line = proc.stdout.readline().strip()  # "listening on HOST:PORT"
-    return proc, int(line.rsplit(":", 1)[1])
+# --------------------------------------------------------------------------- latency none
 
 
-async def serial(port: int, n: int) -> list[float]:
+async def _ours_serial(port: int, n: int) -> float:
+    """Median seconds of one ``read`` with nothing else in flight."""
     async with Client("127.0.0.1", port, keepalive=None) as kvp:
-        for _ in range(200):  # warm-up
+        for _ in range(min(200, n)):
             await kvp.read("$AXIS_ACT")
         times = []
+        clock = time.perf_counter
         for _ in range(n):
-            t0 = time.perf_counter()
+            t0 = clock()
             await kvp.read("$AXIS_ACT")
-            times.append(time.perf_counter() - t0)
-        return times
+            times.append(clock() - t0)
+    return median(times)
 
 
-async def pipelined(port: int, n: int, batch: int) -> float:
-    names = [f"MYE6ARRAY[{i % 512 + 1}]" for i in range(batch)]
+def _peer_serial(port: int, n: int) -> float:
+    assert py_openshowvar is not None
+    client = py_openshowvar.openshowvar("127.0.0.1", port)
+    try:
+        for _ in range(min(200, n)):
+            client.read("$AXIS_ACT", debug=False)
+        times = []
+        clock = time.perf_counter
+        for _ in range(n):
+            t0 = clock()
+            value = client.read("$AXIS_ACT", debug=False)
+            times.append(clock() - t0)
+        assert value and value.startswith(b"{"), value
+    finally:
+        client.close()
+    return median(times)
+
+
+async def _prepare_array(port: int, count: int) -> list[str]:
+    names = [f"MYE6ARRAY[{i}]" for i in range(1, count + 1)]
     async with Client("127.0.0.1", port, keepalive=None) as kvp:
-        await kvp.read_many(names)
+        await kvp.write_many([(n, E6AXIS_TEXT) for n in names])
+    return names
+
+
+async def _ours_many(port: int, names: list[str], calls: int) -> float:
+    """Snapshots of ``len(names)`` variables per second with one ``read_many`` each."""
+    async with Client("127.0.0.1", port, keepalive=None) as kvp:
+        res = await kvp.read_many(names)
+        assert all(r.ok for r in res.values())
         t0 = time.perf_counter()
-        done = 0
-        while done < n:
-            res = await kvp.read_many(names)
-            done += len(res)
-        return done / (time.perf_counter() - t0)
+        for _ in range(calls):
+            await kvp.read_many(names)
+        return calls / (time.perf_counter() - t0)
+
+
+def _peer_many(port: int, names: list[str], calls: int) -> float:
+    assert py_openshowvar is not None
+    client = py_openshowvar.openshowvar("127.0.0.1", port)
+    try:
+        for name in names:
+            assert client.read(name, debug=False)
+        t0 = time.perf_counter()
+        for _ in range(calls):
+            for name in names:
+                client.read(name, debug=False)
+        return calls / (time.perf_counter() - t0)
+    finally:
+        client.close()
+
+
+# --------------------------------------------------------------------------- latency kvp
+
+
+async def _ours_torques(port: int, calls: int) -> float:
+    async with Client("127.0.0.1", port, keepalive=None) as kvp:
+        await kvp.read_joint_torques()
+        t0 = time.perf_counter()
+        for _ in range(calls):
+            tau = await kvp.read_joint_torques()
+        assert tau.shape == (6,)
+        return calls / (time.perf_counter() - t0)
+
+
+async def _six_reads_torques(port: int, calls: int) -> float:
+    """JOpenShowVar's readJointTorques: six sequential element reads (our client, one at a time)."""
+    names = [f"$TORQUE_AXIS_ACT[{i}]" for i in range(1, 7)]
+    async with Client("127.0.0.1", port, keepalive=None) as kvp:
+        await kvp.read(names[0])
+        t0 = time.perf_counter()
+        for _ in range(calls):
+            tau = [float(parse_value(await kvp.read(n), "REAL")) for n in names]  # type: ignore[arg-type]
+        assert len(tau) == 6
+        return calls / (time.perf_counter() - t0)
+
+
+async def _control_cycle(port: int, seconds: float) -> float:
+    """Cycles/s of: read $AXIS_ACT, compute a new target, write MYAXIS (awaiting each)."""
+    async with Client("127.0.0.1", port, keepalive=None) as kvp:
+        await kvp.read("$AXIS_ACT")
+        cycles = 0
+        t0 = time.perf_counter()
+        end = t0 + seconds
+        while time.perf_counter() < end:
+            q = await kvp.read_joint_angles()
+            target = q.copy()
+            target[0] = 5.0 * math.sin(cycles * 0.01)  # a slow sweep of A1, the rest held
+            await kvp.write(
+                "MYAXIS", "{" + ", ".join(f"A{i + 1} {v:.4f}" for i, v in enumerate(target)) + "}"
+            )
+            cycles += 1
+        return cycles / (time.perf_counter() - t0)
+
+
+def service_limit(profile: LatencyProfile) -> tuple[float, float, float]:
+    """(mean read s, mean write s, cycles/s) a single serialising worker allows for read+write."""
+    stall = 0.0
+    if profile.stall_probability:
+        lo, hi = profile.stall_min, profile.stall_max
+        stall = profile.stall_probability * (hi - lo) / math.log(hi / lo)  # log-uniform mean
+    read = profile.read.mean + stall
+    write = profile.write.mean + stall
+    return read, write, 1.0 / (read + write)
+
+
+# --------------------------------------------------------------------------- main
+
+
+def run(quick: bool, repeat: int) -> tuple[list[Row], dict[str, Any]]:
+    rows: list[Row] = []
+    extra: dict[str, Any] = {}
+    n_serial = 300 if quick else 3000
+    many_calls = 3 if quick else 40
+    has_peer = py_openshowvar is not None
+    with EmuProcess("--latency", "none") as emu:
+        ours_rt, peer_rt = [], []
+        names = asyncio.run(_prepare_array(emu.port, 100))
+        ours_many, peer_many = [], []
+        for _ in range(repeat):
+            ours_rt.append(asyncio.run(_ours_serial(emu.port, n_serial)))
+            if has_peer:
+                peer_rt.append(_peer_serial(emu.port, n_serial))
+            ours_many.append(asyncio.run(_ours_many(emu.port, names, many_calls)))
+            if has_peer:
+                peer_many.append(_peer_many(emu.port, names, max(1, many_calls // 4)))
+    rows.append(
+        Row(
+            "serial read round trip `$AXIS_ACT` (latency none, median)",
+            median(ours_rt) * 1e6,
+            "µs",
+            peer=median(peer_rt) * 1e6 if peer_rt else None,
+            peer_name="py-openshowvar",
+            target=("ratio", "<=", 1.0),
+            runs=[x * 1e6 for x in ours_rt],
+            note="" if has_peer else "py-openshowvar not installed: peer skipped",
+        )
+    )
+    rows.append(
+        Row(
+            "100 variables per call: `read_many` vs loop of reads",
+            median(ours_many),
+            "snapshots/s",
+            peer=median(peer_many) if peer_many else None,
+            peer_name="py-openshowvar loop",
+            target=("ratio", ">=", 10.0),
+            runs=ours_many,
+            note=f"ours {1e3 / median(ours_many):.2f} ms per 100 variables"
+            + (f", loop {1e3 / median(peer_many):.2f} ms" if peer_many else ""),
+        )
+    )
+
+    profile = PROFILES["kvp"]
+    t_read, t_write, limit = service_limit(profile)
+    torque_calls = 8 if quick else 120
+    cycle_seconds = 0.3 if quick else 4.0
+    ours_tq, six_tq, cycles, cycles_robot = [], [], [], []
+    for i in range(repeat):
+        # the proxy model alone (--no-robot): nothing else competes for the emulator's loop
+        with EmuProcess("--latency", "kvp", "--seed", str(SEED + i), "--no-robot") as emu:
+            ours_tq.append(asyncio.run(_ours_torques(emu.port, torque_calls)))
+            six_tq.append(asyncio.run(_six_reads_torques(emu.port, max(1, torque_calls // 4))))
+            cycles.append(asyncio.run(_control_cycle(emu.port, cycle_seconds)))
+        # the same cycle with the simulated robot following MYAXIS (the default emulator)
+        with EmuProcess("--latency", "kvp", "--seed", str(SEED + i)) as emu:
+            cycles_robot.append(asyncio.run(_control_cycle(emu.port, cycle_seconds / 2)))
+    rows.append(
+        Row(
+            "`read_joint_torques()` vs six sequential element reads (kvp)",
+            median(ours_tq),
+            "reads/s",
+            peer=median(six_tq),
+            peer_name="6 sequential reads",
+            target=("ratio", ">=", 4.0),
+            runs=ours_tq,
+            note=f"ours {1e3 / median(ours_tq):.2f} ms, six reads {1e3 / median(six_tq):.2f} ms per torque vector",
+        )
+    )
+    rows.append(
+        Row(
+            "read-modify-write cycle ($AXIS_ACT → MYAXIS, kvp, no robot) vs service-time limit",
+            median(cycles),
+            "cycles/s",
+            peer=limit,
+            peer_name="limit",
+            target=("ratio", ">=", 0.9),
+            runs=cycles,
+            note=(
+                f"limit = 1 / (mean read {t_read * 1e3:.3f} ms + mean write {t_write * 1e3:.3f} ms,"
+                f" stalls included) = {limit:.1f} /s"
+            ),
+        )
+    )
+    rows.append(
+        Row(
+            "same cycle, emulator's simulated robot following MYAXIS",
+            median(cycles_robot),
+            "cycles/s",
+            peer=limit,
+            peer_name="limit",
+            runs=cycles_robot,
+            note="informative: the motion kernel shares the emulator's event loop",
+        )
+    )
+    extra["seeds"] = [SEED + i for i in range(repeat)]
+    return rows, extra
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--reads", type=int, default=5000)
-    ap.add_argument("--batch", type=int, default=100)
-    ap.add_argument("--repeat", type=int, default=5)
+    ap = base_parser(__doc__)
     args = ap.parse_args()
-    proc, port = start_emulator()
-    try:
-        medians, p99s, rates = [], [], []
-        for _ in range(args.repeat):
-            t = sorted(asyncio.run(serial(port, args.reads)))
-            medians.append(t[len(t) // 2])
-            p99s.append(t[int(len(t) * 0.99)])
-            rates.append(asyncio.run(pipelined(port, args.reads * 4, args.batch)))
-    finally:
-        proc.terminate()
-        proc.wait(5)
-    print(f"machine: {platform.machine()} {platform.processor() or ''} python {platform.python_version()}")
-    print(f"serial read $AXIS_ACT round trip: median {statistics.median(medians) * 1e6:.0f} us, p99 {statistics.median(p99s) * 1e6:.0f} us")
-    print(f"pipelined read_many ({args.batch} names/call): {statistics.median(rates):,.0f} reads/s")
+    repeat = args.repeat or (1 if args.quick else 5)
+    rows, extra = run(args.quick, repeat)
+    print_rows(f"Client (median of {repeat} runs)", rows)
+    write_json(args.json, "client", rows, extra)
 
 
 if __name__ == "__main__":

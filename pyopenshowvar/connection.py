@@ -234,6 +234,24 @@ class Connection:
                 )
 
     async def _request(self, name: str, build: _Builder, timeout: float | None) -> Reply:
+        if not self._queue and self._closed_exc is None and self._transport is not None:
+            # Fast path of request_many for one request on an idle connection (the serial
+            # control-loop case): same registration, timer, flush and outcome, less overhead.
+            timeout = self.timeout if timeout is None else timeout
+            loop = asyncio.get_running_loop()
+            pending, frame = self._register(name, build(0), loop)
+            pendings = [pending]
+            timer = loop.call_at(loop.time() + timeout, self._expire, pendings, timeout)
+            try:
+                pending.sent_at = time.perf_counter()
+                self._last_activity = time.monotonic()
+                self._transport.write(frame)
+                return await pending.future
+            except asyncio.CancelledError:
+                pending.abandoned = True
+                raise
+            finally:
+                timer.cancel()
         results = await self.request_many([(name, build)], timeout=timeout)
         result = results[0]
         if isinstance(result, BaseException):

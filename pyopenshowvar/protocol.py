@@ -55,6 +55,8 @@ MAX_FRAME = HEADER_SIZE + MAX_CONTENT
 
 _HEADER = struct.Struct(">HH")
 _U16 = struct.Struct(">H")
+#: id, L, mode, first block length: the fixed head of every read request and reply (fast paths)
+_HEAD = struct.Struct(">HHBH")
 #: KVP's status block: a 2-byte length (= 1) followed by the status byte.
 STATUS_BLOCK = b"\x00\x01"
 
@@ -155,6 +157,16 @@ def _block(data: bytes, what: str) -> bytes:
 
 def encode_read(msg_id: int, name: str | bytes) -> bytes:
     """A mode-0 read request, e.g. ``encode_read(1, "$OV_PRO")`` → ``00 01 00 0A 00 00 07 $OV_PRO``."""
+    if type(name) is str and 0 <= msg_id <= MAX_ID:
+        # fast path (the client's hot loop); anything unusual takes the checked path below
+        try:
+            raw = name.encode(ENCODING)
+        except UnicodeEncodeError:
+            pass
+        else:
+            n = len(raw)
+            if n <= MAX_CONTENT - 3:
+                return _HEAD.pack(msg_id, n + 3, 0, n) + raw
     return _frame(msg_id, bytes((Mode.READ,)) + _block(_text(name, "name"), "name"))
 
 
@@ -194,6 +206,21 @@ def encode_request(request: Request) -> bytes:
 
 def encode_reply(reply: Reply) -> bytes:
     """Encode a reply; ``mode=None`` gives the bare 4-byte unknown-mode answer."""
+    mode, value, code, status = reply.mode, reply.value, reply.code, reply.status
+    if (
+        mode is not None
+        and 0 <= mode <= 255
+        and 0 <= reply.msg_id <= MAX_ID
+        and len(value) <= MAX_CONTENT - 6
+        and len(code) == 2
+        and 0 <= status <= 255
+    ):  # fast path (the emulator's hot loop); the checked path below raises the errors
+        return (
+            _HEAD.pack(reply.msg_id, len(value) + 6, mode, len(value))
+            + value
+            + code
+            + bytes((status,))
+        )
     if reply.mode is None:
         return _frame(reply.msg_id, b"")
     if len(reply.code) != 2 or not 0 <= reply.status <= 255:
@@ -234,6 +261,11 @@ def decode_request(frame: bytes | bytearray | memoryview) -> Request:
     Unknown modes decode to a Request with that mode, an empty name and the raw body as value,
     so a server can answer them the way KVP does.
     """
+    if type(frame) is bytes and len(frame) >= 7:
+        # fast path for a well-formed read (the emulator's hot loop); all else is checked below
+        msg_id, length, mode, n = _HEAD.unpack_from(frame)
+        if mode == Mode.READ and length == len(frame) - HEADER_SIZE and n + 7 == len(frame):
+            return Request(msg_id, 0, frame[7:].decode(ENCODING), None)
     msg_id, body = _split(frame)
     if not body:
         raise ProtocolError("request with length 0 (no mode byte)")
@@ -251,6 +283,12 @@ def decode_request(frame: bytes | bytearray | memoryview) -> Request:
 
 def decode_reply(frame: bytes | bytearray | memoryview) -> Reply:
     """Decode one whole reply frame (header included)."""
+    size = len(frame)
+    if type(frame) is bytes and size >= 10:
+        # fast path for a well-formed reply (the client's hot loop); all else is checked below
+        msg_id, length, mode, n = _HEAD.unpack_from(frame)
+        if length == size - HEADER_SIZE and n + 10 == size:
+            return Reply(msg_id, mode, frame[7 : 7 + n], frame[-1], frame[-3:-1])
     msg_id, body = _split(frame)
     if not body:
         return Reply(msg_id, None, b"", 0, b"")
@@ -284,6 +322,8 @@ class FrameDecoder:
         return len(self._buf)
 
     def feed(self, data: bytes | bytearray | memoryview) -> list[bytes]:
+        if not self._buf and type(data) is bytes:
+            return self._feed_bytes(data)
         self._buf += data
         frames: list[bytes] = []
         buf = self._buf
@@ -303,6 +343,27 @@ class FrameDecoder:
             start += size
         if start:
             del buf[:start]
+        return frames
+
+    def _feed_bytes(self, data: bytes) -> list[bytes]:
+        """:meth:`feed` with nothing buffered: frames are sliced from ``data`` without copying it
+        into the buffer first (the common case: a read delivers whole frames)."""
+        frames: list[bytes] = []
+        total = len(data)
+        start = 0
+        while total - start >= HEADER_SIZE:
+            _, length = _HEADER.unpack_from(data, start)
+            if length < self.min_length:
+                raise ProtocolError(f"length field {length} below the minimum {self.min_length}")
+            size = HEADER_SIZE + length
+            if size > self.max_frame:
+                raise ProtocolError(f"frame of {size} bytes exceeds the limit of {self.max_frame}")
+            if total - start < size:
+                break
+            frames.append(data if size == total else data[start : start + size])
+            start += size
+        if start < total:
+            self._buf += data[start:]
         return frames
 
     def eof(self) -> None:

@@ -1,0 +1,39 @@
+"""Smoke test of the benchmark scripts: each runs with ``--quick`` and prints its figures.
+
+Benchmarks never fail CI on a slow machine: nothing here checks a number, only that every
+script runs to the end and prints its table (peers that are not installed are skipped by the
+scripts themselves).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+BENCH = Path(__file__).resolve().parents[1] / "bench"
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize(
+    ("script", "expect"),
+    [
+        ("client_roundtrip.py", "serial read round trip"),
+        ("codec.py", "E6POS"),
+        ("emu_throughput.py", "requests/s, 10 clients"),
+        ("kinematics.py", "Jacobian"),
+    ],
+)
+def test_benchmark_runs_quick(script: str, expect: str) -> None:
+    proc = subprocess.run(
+        [sys.executable, str(BENCH / script), "--quick"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert expect in proc.stdout
+    assert "ours" in proc.stdout
