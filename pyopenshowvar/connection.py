@@ -152,7 +152,8 @@ class Connection:
         sock = transport.get_extra_info("socket")
         if sock is not None:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        assert isinstance(transport, asyncio.Transport)
+        # No isinstance check on the transport: uvloop's transports are not asyncio.Transport
+        # subclasses, and only the interface matters.
         self._transport = transport
         self._last_activity = time.monotonic()
         if self.keepalive:

@@ -220,3 +220,13 @@ async def test_wait_path_done(kvp: Client, emulator: Any) -> None:
     emulator.store.write("PATH_DONE", "FALSE")
     with pytest.raises(TimeoutError):
         await kvp.wait_path_done(poll=0.01, timeout=0.1)
+
+
+def test_works_on_uvloop(emulator_thread: Any) -> None:
+    uvloop = pytest.importorskip("uvloop")
+
+    async def main() -> str:
+        async with Client("127.0.0.1", emulator_thread.port) as kvp:
+            return await kvp.read("$OV_PRO")
+
+    assert uvloop.run(main()) == "100"
