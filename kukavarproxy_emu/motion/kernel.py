@@ -375,7 +375,7 @@ class MotionKernel(Publisher):
         else:
             nxt.t = carry
             if nxt.kind is Kind.LIN:
-                self._lin_base = fk_matrix(self.model, self.q, *self._frames)
+                self._lin_base = fk_matrix(self.model, self._q_base, *self._frames)
         self.pending.popleft()
         self.active.append(nxt)
         return True

@@ -260,6 +260,7 @@ def test_follower_captures_the_target_at_planning_time() -> None:
 def test_actuator_rel_moves_relative_to_the_planned_end_point() -> None:
     robot = make_robot("actuator")
     store = robot.store
+    robot.tick()  # actuator.src: PTP HOME (already there), then $ADVANCE=1
     assert store.read("$ADVANCE") == "1" and store.read("$PRO_NAME1[]") == '"ACTUATOR"'
     x0 = float(store.read("$POS_ACT.X"))
     store.write("MYPOS", "{X 2.0}")
@@ -335,3 +336,23 @@ def test_measurement_noise_is_seeded_and_tiny() -> None:
     assert robot.store.read("$AXIS_ACT").startswith("{E6AXIS: A1 0.0, A2 -90.0000")
     diff = np.array([meas[f"A{i}"] for i in range(1, 7)]) - HOME  # type: ignore[index]
     assert 0 < np.max(np.abs(diff)) < 1e-4
+
+
+def test_consecutive_exact_lins_lose_no_motion() -> None:
+    # Thirty short exact LINs (each starts in the cycle its predecessor ends) must add up to
+    # the whole path: each one is based on its predecessor's end pose.
+    q0 = np.array([0.0, -80.0, 80.0, 0.0, 30.0, 0.0])
+    robot = make_robot("none", start=q0)
+    from pyopenshowvar.kinematics import forward
+
+    p0 = forward(KR6R900SIXX, q0)
+    kernel = robot.kernel
+    points = [p0 + np.array([0.0, 2.0 * i, 0.0, 0.0, 0.0, 0.0]) for i in range(1, 31)]
+    for p in points:
+        kernel.lin(p)  # no approximation: each segment stops exactly
+    for _ in range(3000):
+        robot.tick()
+        if not kernel.moving and not kernel.queued:
+            break
+    final = forward(KR6R900SIXX, kernel.q)
+    np.testing.assert_allclose(final[:3], points[-1][:3], atol=1e-3)
