@@ -27,9 +27,12 @@ from typing import Annotated, Any
 import typer
 
 from apps import bench as _bench
+from apps import demo as _demo
 from apps import discover as _discover
 from apps import live as _live
 from apps import sessions as _sessions
+from apps.casestudies import linefollow_cli as _linefollow
+from apps.casestudies import teleop_cli as _teleop_cli
 from apps.common import (
     EXIT_CONNECTION,
     EXIT_INTERRUPTED,
@@ -126,6 +129,11 @@ app.command("bench")(_bench.bench)
 app.command("discover")(_discover.discover)
 app.command("repl")(_sessions.repl)
 app.command("monitor")(_sessions.monitor)
+
+app.command("demo")(_demo.demo)
+app.command("linefollow")(_linefollow.linefollow)
+app.command("teleop")(_teleop_cli.teleop)
+app.command("haptic")(_teleop_cli.haptic)
 
 
 @app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})

@@ -1,0 +1,336 @@
+"""Case study 2 of the thesis: follow a line drawn on a table (open loop, KRC kinematics).
+
+:func:`run_line_following` takes a connected :class:`pyopenshowvar.Client` and an image of the
+line. It detects the path (:mod:`apps.casestudies.linefollow_vision`: threshold, endpoints, A*
+preferring the centre), samples it at ``resolution_mm``, maps it to the robot base (camera
+scale and table pose, tool pointing down), checks every point with the client-side IK, writes
+it to ``MYPOSARRAY`` with the path handshake and lets the ``CART_PATH`` program run it
+(``LIN MYPOSARRAY[ROW] C_DIS``). While the robot moves it polls ``$POS_ACT`` over KVP, exactly
+what a user of a real KRC can do, and reports the deviation of the executed path from the
+detected one, plus the execution time. Plots in the spirit of Figure 4.15 and CSVs go to
+``out_dir``.
+
+Robot program: ``cart_path`` (docs/emulator-robot.md). The robot must already stand at a
+non-singular pose (the "camera pose" from which the photo was taken); the path starts with an
+approach point ``lift_mm`` above the first line point and ends ``lift_mm`` above the last.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from apps.casestudies import linefollow_vision as vision
+from apps.casestudies.common import CaseResult, new_figure, output_dir, save_figure, write_csv
+from pyopenshowvar import Client
+from pyopenshowvar.kinematics import KR6R900SIXX, RobotModel, UnreachableError, inverse
+from pyopenshowvar.krl import E6Pos
+
+__all__ = [
+    "DEFAULT_TABLE_POSE",
+    "THESIS",
+    "TOOL_DOWN",
+    "Table",
+    "camera_pose",
+    "detect_path",
+    "parked_store",
+    "run_line_following",
+]
+
+#: Image centre in $BASE (X, Y, Z mm) and the angle (deg, about Z) of the image x axis:
+#: 400–640 mm in front of the robot, ±160 mm sideways, 300 mm up (A5 ≈ 15–40°, far from the
+#: wrist singularity, checked by IK for every point before anything moves).
+DEFAULT_TABLE_POSE = (520.0, 0.0, 300.0, -90.0)
+#: A, B, C with the flange Z axis pointing straight down (R = Rz(180)·Rx(180)).
+TOOL_DOWN = (180.0, 0.0, 180.0)
+#: The thesis' figures for this case study (§4.2.2.3, Figure 4.15).
+THESIS = {"max_error_mm": "< 5", "execution_time_s": "≈ 10"}
+
+
+@dataclass(frozen=True)
+class Table:
+    """Pixel → $BASE mapping: a camera looking straight down at a flat table.
+
+    Image x (columns) runs along the table's x axis, image y (rows, downwards) along −y, so the
+    table frame is right-handed with Z up; ``pose`` places the image centre in $BASE.
+    """
+
+    width_px: int
+    height_px: int
+    scale_mm_per_px: float = 0.5
+    pose: tuple[float, float, float, float] = DEFAULT_TABLE_POSE
+
+    def to_base(self, xy_px: np.ndarray) -> np.ndarray:
+        """(N, 2) pixel (x, y) → (N, 3) X, Y, Z in $BASE (mm)."""
+        x0, y0, z0, a = self.pose
+        u = (xy_px[:, 0] - (self.width_px - 1) / 2) * self.scale_mm_per_px
+        v = -(xy_px[:, 1] - (self.height_px - 1) / 2) * self.scale_mm_per_px
+        ca, sa = math.cos(math.radians(a)), math.sin(math.radians(a))
+        return np.column_stack([x0 + ca * u - sa * v, y0 + sa * u + ca * v, np.full(len(u), z0)])
+
+
+def camera_pose(table: Table, height_mm: float = 100.0) -> tuple[float, ...]:
+    """The pose above the image centre from which the photo is taken (a good start pose)."""
+    x0, y0, z0, _ = table.pose
+    return (x0, y0, z0 + height_mm, *TOOL_DOWN)
+
+
+def parked_store(pose: Sequence[float], model: RobotModel = KR6R900SIXX) -> Any:
+    """An emulator :class:`~kukavarproxy_emu.store.VariableStore` with the robot standing at
+    ``pose`` (e.g. :func:`camera_pose`) instead of HOME, whose A5 = 0 is the wrist singularity
+    a LIN must not start from. For demos and tests; a real robot is jogged there."""
+    from kukavarproxy_emu.store import VariableStore
+    from pyopenshowvar.kinematics import forward, status_turn
+
+    q = inverse(model, pose, current=(0.0, -60.0, 110.0, 0.0, 30.0, 0.0))
+    p = forward(model, q)
+    s, t = status_turn(model, q)
+    ext = ", E1 0.0, E2 0.0, E3 0.0, E4 0.0, E5 0.0, E6 0.0}"
+    axes = "{E6AXIS: " + ", ".join(f"A{i} {v:.6f}" for i, v in enumerate(q, 1)) + ext
+    pos = "{E6POS: " + ", ".join(f"{k} {v:.6f}" for k, v in zip("XYZABC", p, strict=True))
+    return VariableStore(overrides={"$AXIS_ACT": axes, "$POS_ACT": pos + f", S {s}, T {t}" + ext})
+
+
+@dataclass
+class Detection:
+    """The detected line: region, A* pixels, smoothed path (px) and its ends."""
+
+    gray: np.ndarray
+    mask: np.ndarray
+    pixels: list[tuple[int, int]]
+    path_px: np.ndarray
+    start: tuple[int, int]
+    end: tuple[int, int]
+
+
+def detect_path(
+    image: str | Path,
+    start: tuple[int, int] | None = None,
+    end: tuple[int, int] | None = None,
+    *,
+    centre_weight: float = 4.0,
+) -> Detection:
+    """Segment the line, choose its ends (given as (x, y) pixels, or found) and run A*."""
+    gray = vision.load_gray(str(image))
+    mask = vision.segment(gray)
+    dist = vision.distance_map(mask)
+    if start is None or end is None:
+        a, b = vision.find_endpoints(mask, dist)
+    if start is not None:
+        a = vision.snap_to_region(mask, (start[1], start[0]))
+    if end is not None:
+        b = vision.snap_to_region(mask, (end[1], end[0]))
+    pixels = vision.astar(mask, a, b, dist=dist, centre_weight=centre_weight)
+    window = max(3, int(2 * dist.max()) | 1)  # about the line's width: staircase out
+    return Detection(gray, mask, pixels, vision.smooth_path(pixels, window), a, b)
+
+
+def _check_reachable(model: RobotModel, poses: np.ndarray) -> None:
+    """IK every point, nearest the previous one: refuse unreachable or singular paths early."""
+    q = np.array([0.0, -60.0, 110.0, 0.0, 30.0, 0.0])
+    for i, pose in enumerate(poses):
+        try:
+            q = inverse(model, pose, current=q)
+        except UnreachableError as exc:
+            raise ValueError(
+                f"path point {i} {np.round(pose[:3], 1)} is unreachable: {exc}"
+            ) from None
+        if abs(q[4]) < 2.0:
+            raise ValueError(f"path point {i} is at the wrist singularity (A5 = {q[4]:.1f}°)")
+        if not model.within_limits(q):
+            raise ValueError(f"path point {i}: {', '.join(model.limit_violations(q))}")
+
+
+async def _execute(
+    client: Client, poses: np.ndarray, *, timeout: float, poll: float
+) -> list[tuple[float, float, float, float]]:
+    """Write the path, start it, and poll ``$POS_ACT`` until ``PATH_DONE``: (t, X, Y, Z)."""
+    samples: list[tuple[float, float, float, float]] = []
+    await client.write_cartesian_path([tuple(map(float, p)) for p in poses])
+    t0 = time.monotonic()
+    names = ["$POS_ACT", "PATH_DONE", "$STOPMESS"]
+    while True:
+        res = await client.read_many(names, typed=True)
+        t = time.monotonic() - t0
+        pos = res["$POS_ACT"].unwrap()
+        if isinstance(pos, E6Pos):
+            samples.append((t, float(pos.x), float(pos.y), float(pos.z)))
+        if res["$STOPMESS"].ok and res["$STOPMESS"].value is True:
+            msg = await client.read_many(["$EMU_MESSAGE[]"])
+            text = msg["$EMU_MESSAGE[]"].text or "(no message)"
+            raise RuntimeError(f"the robot program stopped: {text}")
+        if res["PATH_DONE"].unwrap() is True:
+            return samples
+        if t > timeout:
+            raise TimeoutError(f"path not done after {timeout:.0f} s")
+        if poll > 0:
+            import asyncio
+
+            await asyncio.sleep(poll)
+
+
+async def run_line_following(
+    client: Client,
+    image_path: str | Path,
+    *,
+    start: tuple[int, int] | None = None,
+    end: tuple[int, int] | None = None,
+    resolution_mm: float = 2.0,
+    scale_mm_per_px: float = 0.5,
+    table_pose: Sequence[float] = DEFAULT_TABLE_POSE,
+    speed: float | None = None,
+    duration_s: float = 10.0,
+    cdis_mm: float = 1.0,
+    acc: float | None = 1.0,
+    lift_mm: float = 10.0,
+    time_scale: float = 1.0,
+    poll_s: float = 0.0,
+    ground_truth: np.ndarray | None = None,
+    out_dir: str | Path | None = None,
+    model: RobotModel = KR6R900SIXX,
+) -> CaseResult:
+    """Detect the line in ``image_path``, make the robot follow it, measure how well.
+
+    ``start``/``end`` are (x, y) pixels (found automatically when omitted). ``speed`` is
+    ``$VEL.CP`` in m/s; when ``None`` it is chosen so the line takes ``duration_s``.
+    ``cdis_mm`` is ``$APO.CDIS`` (the approximation distance: larger blends more and cuts
+    corners more). ``time_scale`` converts wall seconds to robot seconds (the emulator's
+    ``--speed``; 1 on a real robot). ``ground_truth`` (N, 2 pixels) adds the detection error.
+    Points are limited to 512 (MYPOSARRAY): the resolution is coarsened if needed.
+    """
+    out = output_dir(out_dir, None)
+    det = detect_path(image_path, start, end)
+    h, w = det.gray.shape
+    table = Table(w, h, scale_mm_per_px, tuple(table_pose))  # type: ignore[arg-type]
+    detected = table.to_base(det.path_px)  # dense detected path in $BASE (mm)
+    length = float(np.linalg.norm(np.diff(detected, axis=0), axis=1).sum())
+    res_mm = max(resolution_mm, length / 509)  # 512 rows minus approach and retract
+    line = vision.resample(detected, res_mm)
+    lift = np.array([0.0, 0.0, lift_mm])
+    xyz = np.vstack([line[0] + lift, line, line[-1] + lift])
+    poses = np.column_stack([xyz, np.tile(TOOL_DOWN, (len(xyz), 1))])
+    _check_reachable(model, poses)
+
+    vel = speed if speed is not None else length / duration_s / 1000.0
+    old = await client.read_many(["$VEL.CP", "$ACC.CP", "$APO.CDIS"])
+    await client.write("$VEL.CP", round(vel, 6))
+    if acc is not None:
+        await client.write("$ACC.CP", acc)
+    await client.write("$APO.CDIS", cdis_mm)
+    expected = (length + 2 * lift_mm + 400.0) / (vel * 1000.0) / time_scale
+    try:
+        samples = await _execute(client, poses, timeout=10 + 3 * expected, poll=poll_s)
+    finally:
+        for name, r in old.items():
+            if r.text is not None:
+                await client.write(name, r.text)
+
+    data = np.array(samples)
+    t, pts = data[:, 0] * time_scale, data[:, 1:4]
+    # On-line samples: those whose nearest point of the commanded polyline is on the line part
+    # (not on the approach from the start pose, nor on the lift at the end).
+    on = _on_line_mask(pts, xyz)
+    if not on.any():
+        raise RuntimeError("no $POS_ACT sample on the line: polling too slow?")
+    err_xy = vision.polyline_distance(pts[:, :2], detected[:, :2])
+    err_z = np.abs(pts[:, 2] - table.pose[2])
+    e, ez, ton = err_xy[on], err_z[on], t[on]
+    metrics: dict[str, float] = {
+        "max_error_mm": float(e.max()),
+        "rms_error_mm": float(np.sqrt(np.mean(e**2))),
+        "max_z_error_mm": float(ez.max()),
+        "execution_time_s": float(ton[-1] - ton[0]),
+        "path_length_mm": length,
+        "points": float(len(poses)),
+        "resolution_mm": res_mm,
+        "speed_mm_s": vel * 1000.0,
+        "samples": float(on.sum()),
+    }
+    if ground_truth is not None:
+        gt = table.to_base(np.asarray(ground_truth, dtype=np.float64))
+        metrics["detection_error_mm"] = float(
+            vision.polyline_distance(line[:, :2], gt[:, :2]).max()
+        )
+    result = CaseResult("line following", metrics, dict(THESIS))
+    _write_outputs(result, out, det, table, detected, xyz, t, pts, on, err_xy, err_z)
+    return result
+
+
+def _on_line_mask(pts: np.ndarray, xyz: np.ndarray) -> np.ndarray:
+    """True for samples nearest to the line part of the commanded polyline (rows 2..n-1)."""
+    d_line = vision.polyline_distance(pts, xyz[1:-1])
+    d_in = vision.polyline_distance(pts, xyz[:2])
+    d_out = vision.polyline_distance(pts, xyz[-2:])
+    mask: np.ndarray = (d_line <= d_in) & (d_line <= d_out) & (pts[:, 2] < xyz[1, 2] + 1.0)
+    return mask
+
+
+def _write_outputs(
+    result: CaseResult,
+    out: Path,
+    det: Detection,
+    table: Table,
+    detected: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    pts: np.ndarray,
+    on: np.ndarray,
+    err_xy: np.ndarray,
+    err_z: np.ndarray,
+) -> None:
+    """CSV of the samples and of the path, and the three Figure-4.15-like plots."""
+    rows: list[list[Any]] = [
+        [f"{ti:.4f}", f"{p[0]:.3f}", f"{p[1]:.3f}", f"{p[2]:.3f}", int(o), f"{e:.4f}", f"{ez:.4f}"]
+        for ti, p, o, e, ez in zip(t, pts, on, err_xy, err_z, strict=True)
+    ]
+    result.add_file(
+        write_csv(
+            out / "linefollow_samples.csv",
+            rows,
+            ["t_s", "x_mm", "y_mm", "z_mm", "on_line", "error_xy_mm", "error_z_mm"],
+        )
+    )
+    result.add_file(
+        write_csv(
+            out / "linefollow_path.csv",
+            [[i, *(f"{v:.3f}" for v in p)] for i, p in enumerate(xyz, 1)],
+            ["row", "x_mm", "y_mm", "z_mm"],
+        )
+    )
+
+    fig, ax = new_figure()
+    ax.imshow(det.gray, cmap="gray", vmin=0, vmax=1)
+    ax.contour(det.mask, levels=[0.5], colors="tab:blue", linewidths=0.6)
+    ax.plot(det.path_px[:, 0], det.path_px[:, 1], color="tab:red", lw=1.2, label="A* path")
+    ax.plot(*det.path_px[0], "go", label="start")
+    ax.plot(*det.path_px[-1], "rs", label="end")
+    ax.set_title("Detected line and traversable path (image)")
+    ax.legend(loc="lower right", fontsize=8)
+    result.add_file(save_figure(fig, out / "linefollow_detection.png"))
+
+    fig, ax = new_figure()
+    ax.plot(detected[:, 1], detected[:, 0], color="tab:blue", lw=3, alpha=0.4, label="detected")
+    ax.plot(pts[on, 1], pts[on, 0], color="tab:red", lw=1, label="executed ($POS_ACT)")
+    ax.set_xlabel("Y in $BASE (mm)")
+    ax.set_ylabel("X in $BASE (mm)")
+    ax.set_aspect("equal")
+    ax.invert_xaxis()  # seen from above with the robot at the bottom: +Y to the left
+    ax.set_title("Detected vs executed path (table, robot base)")
+    ax.legend(fontsize=8)
+    result.add_file(save_figure(fig, out / "linefollow_path.png"))
+
+    fig, ax = new_figure()
+    ax.plot(t[on] - t[on][0], err_xy[on], label="XY deviation")
+    ax.plot(t[on] - t[on][0], err_z[on], label="Z deviation")
+    ax.set_xlabel("time on the line (s)")
+    ax.set_ylabel("deviation from the detected path (mm)")
+    ax.set_title(f"Tracking error: max {err_xy[on].max():.3f} mm")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    result.add_file(save_figure(fig, out / "linefollow_error.png"))

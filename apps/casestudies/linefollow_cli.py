@@ -1,0 +1,100 @@
+"""``kvp linefollow``: the thin command around :func:`~apps.casestudies.linefollow.run_line_following`.
+
+Talks to the robot given by the global ``--host``/``--port`` (or ``kvp --emulate``, which is
+the default emulator running ``follow``: use ``--emulate`` of *this* command instead, which
+starts one running ``cart_path`` with the robot parked at the camera pose). Heavy imports
+(numpy vision, matplotlib) happen only when the command runs.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+__all__ = ["linefollow"]
+
+
+def linefollow(
+    image: Annotated[
+        Path | None, typer.Argument(help="PNG/JPG of the line; omitted: generate one.")
+    ] = None,
+    start: Annotated[str | None, typer.Option(help="Start pixel 'x,y' (default: found).")] = None,
+    end: Annotated[str | None, typer.Option(help="End pixel 'x,y' (default: found).")] = None,
+    resolution: Annotated[float, typer.Option(help="Path sampling step, mm.")] = 2.0,
+    scale: Annotated[float, typer.Option(help="Camera scale, mm per pixel.")] = 0.5,
+    table: Annotated[
+        str, typer.Option(help="Image centre in $BASE and its rotation: 'X,Y,Z,A'.")
+    ] = "520,0,300,-90",
+    duration: Annotated[float, typer.Option(help="Target time on the line, s.")] = 10.0,
+    cdis: Annotated[float, typer.Option(help="$APO.CDIS approximation distance, mm.")] = 1.0,
+    seed: Annotated[int, typer.Option(help="Seed of the generated image.")] = 0,
+    out: Annotated[Path, typer.Option("--out", help="Output folder.")] = Path("out/linefollow"),
+    emulate: Annotated[
+        bool, typer.Option("--emulate", help="Run on an embedded emulator (cart_path).")
+    ] = False,
+    speed: Annotated[float, typer.Option(help="Emulator speed factor with --emulate.")] = 1.0,
+) -> None:
+    """Follow a line drawn on a table (thesis case study 2): A*, LIN path, $POS_ACT deviation."""
+    import asyncio
+
+    from rich.console import Console
+
+    from apps.casestudies.common import output_dir, summary_table
+    from apps.casestudies.linefollow import Table, camera_pose, parked_store, run_line_following
+    from apps.casestudies.lineimage import generate_line_image
+    from apps.common import Opts, fail_for
+    from pyopenshowvar import Client
+
+    def pixel(text: str | None) -> tuple[int, int] | None:
+        if text is None:
+            return None
+        x, y = (int(v) for v in text.split(","))
+        return (x, y)
+
+    folder = output_dir(out)
+    truth = None
+    if image is None:
+        generated = generate_line_image(folder / "line.png", seed=seed)
+        image, truth = folder / "line.png", generated.centreline
+    pose = tuple(float(v) for v in table.split(","))
+    host, port, scale_t = Opts.host, Opts.port, 1.0
+    emu: Any = None
+    if emulate:
+        from apps.casestudies.linefollow_vision import load_gray
+        from kukavarproxy_emu import EmulatorConfig, EmulatorThread
+
+        h, w = load_gray(str(image)).shape
+        store = parked_store(camera_pose(Table(w, h, scale, pose)))  # type: ignore[arg-type]
+        config = EmulatorConfig(port=0, program="cart_path", speed=speed, latency="kvp")
+        emu = EmulatorThread(config, store=store).start()
+        host, port, scale_t = "127.0.0.1", emu.port, speed
+
+    async def job() -> Any:
+        async with Client(host, port, timeout=Opts.timeout) as client:
+            return await run_line_following(
+                client,
+                image,
+                start=pixel(start),
+                end=pixel(end),
+                resolution_mm=resolution,
+                scale_mm_per_px=scale,
+                table_pose=pose,
+                duration_s=duration,
+                cdis_mm=cdis,
+                time_scale=scale_t,
+                ground_truth=truth,
+                out_dir=folder,
+            )
+
+    try:
+        result = asyncio.run(job())
+    except (OSError, TimeoutError, RuntimeError, ValueError) as exc:
+        fail_for(exc)
+    finally:
+        if emu is not None:
+            emu.stop()
+    Console().print(summary_table([result], title="Line following: ours vs thesis"))
+    for f in result.files:
+        typer.echo(f)

@@ -1,0 +1,104 @@
+"""``kvp teleop`` and ``kvp haptic``: thin commands over :mod:`.teleop` and :mod:`.haptic`.
+
+``--sim`` starts an in-process emulator running the program the case study needs
+(EXT_MOVE_AXIS or ACTUATOR) with the ``kvp`` latency profile; without it the commands talk to
+``--host/--port`` (a real KRC must run the matching KRL program).
+"""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+__all__ = ["haptic", "teleop"]
+
+
+def _run(program: str, sim: bool, job: Any) -> Any:
+    from rich.console import Console
+
+    from apps.casestudies.common import summary_table
+    from apps.common import Opts, fail_for
+    from pyopenshowvar import Client, KvpError
+
+    thread = None
+    host, port = Opts.host, Opts.port
+    if sim:
+        from kukavarproxy_emu import EmulatorConfig, EmulatorThread
+
+        thread = EmulatorThread(EmulatorConfig(port=0, program=program, latency="kvp"))
+        thread.start()
+        host, port = "127.0.0.1", thread.port
+
+    async def main() -> Any:
+        async with Client(host, port, timeout=Opts.timeout) as kvp:
+            return await job(kvp)
+
+    try:
+        result = asyncio.run(main())
+    except KvpError as exc:
+        fail_for(exc)
+    finally:
+        if thread is not None:
+            thread.stop()
+    Console().print(summary_table([result], title=result.name))
+    for path in result.files:
+        typer.echo(str(path))
+    return result
+
+
+def teleop(
+    mode: Annotated[
+        str, typer.Option(help="position (eq. 2.7) or velocity (eq. 4.2).")
+    ] = "position",
+    device: Annotated[
+        str, typer.Option(help="figure8, circle, step, keyboard or a CSV path.")
+    ] = "figure8",
+    duration: Annotated[float, typer.Option(help="Seconds.")] = 10.0,
+    program: Annotated[str, typer.Option(help="ext_move_axis or follow.")] = "ext_move_axis",
+    out: Annotated[Path, typer.Option(help="Output folder.")] = Path("out"),
+    sim: Annotated[bool, typer.Option("--sim", help="Run against an in-process emulator.")] = False,
+) -> None:
+    """Case study 3: teleoperate with a hand device (custom IK + PID → MYAXIS)."""
+    from apps.casestudies import devices as dev
+    from apps.casestudies.teleop import run_teleoperation
+
+    scripts = {"figure8": dev.figure_eight(), "circle": dev.circle(), "step": dev.step()}
+    hand: dev.HandDevice
+    if device == "keyboard":
+        hand = dev.KeyboardDevice()
+        typer.echo("arrows/WASD move, R/F up/down, space recentres, q quits", err=True)
+    elif device in scripts:
+        hand = dev.ScriptedDevice(scripts[device], duration=duration)
+    else:
+        hand = dev.ScriptedDevice(dev.replay_csv(device), duration=duration)
+    _run(
+        program,
+        sim,
+        lambda kvp: run_teleoperation(
+            kvp,
+            hand,
+            mode=mode,  # type: ignore[arg-type]
+            duration=duration,
+            out_dir=out,
+            program=program,  # type: ignore[arg-type]
+        ),
+    )
+
+
+def haptic(
+    duration: Annotated[float, typer.Option(help="Seconds.")] = 8.0,
+    payload: Annotated[float, typer.Option(help="Held payload, kg.")] = 0.0,
+    out: Annotated[Path, typer.Option(help="Output folder.")] = Path("out"),
+    sim: Annotated[bool, typer.Option("--sim", help="Run against an in-process emulator.")] = False,
+) -> None:
+    """Case study 4: haptic force feedback through MYPOS / ACTUATOR and $TORQUE_AXIS_ACT."""
+    from apps.casestudies.haptic import run_haptic
+
+    _run(
+        "actuator",
+        sim,
+        lambda kvp: run_haptic(kvp, duration=duration, payload_kg=payload, out_dir=out),
+    )
