@@ -88,8 +88,16 @@ def build_parser() -> argparse.ArgumentParser:
     rob.add_argument(
         "--program",
         default="follow",
-        choices=ROBOT_PROGRAMS,
-        help="robot program the controller runs (default follow: LOOP PTP MYAXIS C_PTP)",
+        metavar="NAME|PROG.src",
+        help=f"robot program: a KRL .src file (its .dat beside it is loaded) or a shipped one,"
+        f" {' | '.join(ROBOT_PROGRAMS)} (default follow: LOOP PTP MYAXIS C_PTP)",
+    )
+    rob.add_argument(
+        "--sps",
+        default="sps",
+        metavar="SPS.SUB",
+        help="submit program run beside it (default: the shipped sps.sub, OUTPUT_VARS to $OUT;"
+        " none = no SPS)",
     )
     rob.add_argument(
         "--speed", type=float, default=1.0, help="simulated time runs F times faster (default 1)"
@@ -130,6 +138,7 @@ def config_from_args(args: argparse.Namespace) -> EmulatorConfig:
         faults=tuple(Fault.parse(spec) for spec in args.fault),
         robot=args.robot,
         program=args.program,
+        sps=args.sps,
         speed=args.speed,
         ipo=args.ipo,
         noise=args.noise,
@@ -167,8 +176,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         asyncio.run(serve(config))
     except KeyboardInterrupt:
         pass
-    except (OSError, ValueError) as exc:  # port in use, bad address, bad --config file
-        log.error("%s", exc)
+    except (OSError, ValueError) as exc:  # port in use, bad --config, KRL syntax error
+        print(f"kukavarproxy-emu: error: {exc}", file=sys.stderr, flush=True)
         return 1
     return 0
 

@@ -22,9 +22,15 @@ DEFAULT_UDP_PORT = 6999
 #: ``legacy-ids``: pre-9.0 bug, every reply to one TCP read carries the first request's id.
 #: ``no-ping``: pre-9.0 proxies pass ``PING`` to CrossComm, so it reads as an unknown variable.
 KNOWN_QUIRKS = frozenset({"legacy-ids", "no-ping"})
-#: ``--program`` names (kept here so the config does not import numpy-heavy motion code;
-#: ``kukavarproxy_emu.motion.PROGRAMS`` has the same keys, a test checks it).
+#: ``--program`` names of the shipped KRL programs (kept here so the config does not import
+#: numpy-heavy motion code; ``kukavarproxy_emu.motion.PROGRAMS`` has the same keys, a test
+#: checks it). Any other ``--program`` is the path of a ``.src`` file.
 ROBOT_PROGRAMS = ("follow", "actuator", "ext_move_axis", "joint_path", "cart_path", "none")
+_KRL_SUFFIXES = (".src", ".sub")
+
+
+def _is_program(value: str) -> bool:
+    return value in ROBOT_PROGRAMS or value.lower().endswith(_KRL_SUFFIXES)
 
 
 @dataclass(frozen=True)
@@ -61,8 +67,11 @@ class EmulatorConfig:
     max_pending: int = 128
     #: Simulate the robot (motion kernel + program + SPS); False = static variables only.
     robot: bool = True
-    #: Robot program run by the simulated controller (see docs/emulator-robot.md).
+    #: Robot program: a shipped name (see docs/emulator-robot.md) or a ``.src`` path (docs/krl.md).
     program: str = "follow"
+    #: Submit (SPS) program: ``"sps"`` (the shipped Algorithm 4.11), a ``.sub``/``.src`` path,
+    #: or ``"none"``.
+    sps: str = "sps"
     #: Simulated time runs this many times faster than wall time.
     speed: float = 1.0
     #: Interpolation cycle, simulated seconds (KRC4: 12 ms).
@@ -79,10 +88,15 @@ class EmulatorConfig:
             raise ValueError("max_clients and idle_timeout must be >= 0")
         if self.max_pending < 1 or self.max_frame < 8:
             raise ValueError("max_pending must be >= 1 and max_frame >= 8")
-        if self.program not in ROBOT_PROGRAMS:
+        object.__setattr__(self, "program", str(self.program))
+        object.__setattr__(self, "sps", str(self.sps))
+        if not _is_program(self.program):
             raise ValueError(
-                f"unknown program {self.program!r} (known: {', '.join(ROBOT_PROGRAMS)})"
+                f"unknown program {self.program!r} (known: {', '.join(ROBOT_PROGRAMS)},"
+                " or a .src file)"
             )
+        if self.sps not in ("sps", "none") and not self.sps.lower().endswith(_KRL_SUFFIXES):
+            raise ValueError(f"--sps needs 'sps', 'none' or a .sub/.src file, not {self.sps!r}")
         if not (self.speed > 0 and self.ipo > 0 and self.noise >= 0):
             raise ValueError("speed and ipo must be > 0 and noise >= 0")
         unknown = set(self.quirks) - KNOWN_QUIRKS

@@ -148,6 +148,9 @@ class _Connection(asyncio.BufferedProtocol):
         if self.closed:
             return
         self.last_rx = time.monotonic()
+        robot = self.emu.robot
+        if robot is not None:
+            robot.clock.poll()  # a due IPO tick goes before this batch (bounded jitter)
         try:
             frames = self.decoder.feed(self._rbuf[:nbytes])
             if frames:
@@ -354,7 +357,11 @@ class Emulator:
         if self.config.discovery_enabled:
             await self._start_discovery()
         if self.config.robot:
-            self._start_robot()
+            try:
+                self._start_robot()
+            except BaseException:  # KRL syntax error, missing program file: do not leak the port
+                await self.close()
+                raise
         log.info("KUKAVARPROXY emulator listening on %s:%d", self.host, self.port)
         return self
 
@@ -365,6 +372,7 @@ class Emulator:
         self.robot = Robot(
             self.store,
             program=cfg.program,
+            sps=cfg.sps,
             ipo=cfg.ipo,
             speed=cfg.speed,
             noise=cfg.noise,

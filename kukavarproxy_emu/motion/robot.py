@@ -2,7 +2,8 @@
 
 Each tick, in this order and without awaiting in between (so a KVP read, served on the same
 event loop, always sees one whole cycle): acknowledge ``EMU_RESTART``; the robot program's
-advance run plans motions; the SPS copies OUTPUT_VARS to $OUT; the kernel interpolates one
+advance run (the KRL interpreter) plans motions; the submit interpreter runs one pass of
+the SPS (by default Algorithm 4.11, OUTPUT_VARS to $OUT); the kernel interpolates one
 cycle and publishes $AXIS_ACT, $POS_ACT, $TORQUE_AXIS_ACT, ...
 
 **Errors.** A refused motion (software limit switch, unreachable pose, uninitialised target)
@@ -16,6 +17,8 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -26,7 +29,10 @@ from pyopenshowvar.krl import KrlEnum, Struct
 from ..store import VariableStore
 from .clock import IpoClock, JitterStats
 from .kernel import MotionKernel, MotionRefused
-from .programs import Idle, Program, Sps, make_program
+from .programs import Idle, Program, make_program
+
+if TYPE_CHECKING:
+    from ..krl.executor import KrlSubmit
 
 __all__ = ["MESSAGE_LENGTH", "Robot"]
 
@@ -44,7 +50,8 @@ class Robot:
         self,
         store: VariableStore,
         *,
-        program: str | Program = "follow",
+        program: str | Path | Program = "follow",
+        sps: str | Path | None = "sps",
         ipo: float = 0.012,
         speed: float = 1.0,
         model: RobotModel = KR6R900SIXX,
@@ -54,8 +61,17 @@ class Robot:
         self.store = store
         self.kernel = MotionKernel(store, model, ipo=ipo, noise=noise, seed=seed)
         self.kernel.on_fault = self.fault
-        self.program = make_program(program) if isinstance(program, str) else program
-        self.sps = Sps(store)
+        if isinstance(program, Program):
+            self.program = program
+        else:
+            self.program = make_program(program, store)
+        #: The submit interpreter running the SPS (Algorithm 4.11 by default); None: no SPS.
+        self.sps: KrlSubmit | None = None
+        if sps is not None and sps != "none":
+            from ..krl.executor import KrlSubmit, load_module  # the interpreter imports motion
+
+            self.sps = KrlSubmit(load_module(sps), store, ipo=ipo)
+            self.sps.start()
         self.clock = IpoClock(self.tick, ipo=ipo, speed=speed)
         #: True while the robot program runs (False after a stop or with no program).
         self.running = False
@@ -92,7 +108,8 @@ class Robot:
                 self.program.step(self.kernel)
             except MotionRefused as exc:
                 self.fault(str(exc))
-        self.sps.step()
+        if self.sps is not None:
+            self.sps.step()
         self.kernel.tick()
 
     # --- errors ------------------------------------------------------------------------------
@@ -112,6 +129,8 @@ class Robot:
         self.message = ""
         self._set("$EMU_MESSAGE[]", "")
         self._set("$STOPMESS", False)
+        if self.sps is not None and not self.sps.running:
+            self.sps.start()
         self._begin()
 
     def _check_restart(self) -> None:

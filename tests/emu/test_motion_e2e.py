@@ -135,7 +135,10 @@ async def test_cart_path_with_lin_end_to_end(emulator_factory: Any) -> None:
         await kvp.wait_path_done(poll=0.002, timeout=5.0)
         pos = await kvp.read_value("$POS_ACT")
     assert isinstance(pos, Struct)
-    np.testing.assert_allclose([float(pos[k]) for k in "XYZABC"], pts[-1], atol=1e-3)  # type: ignore[arg-type]
+    got = np.array([float(pos[k]) for k in "XYZABC"])  # type: ignore[arg-type]
+    diff = got - np.array(pts[-1])
+    diff[3:] = (diff[3:] + 180.0) % 360.0 - 180.0  # A/C = 180 and -180 are the same angle
+    np.testing.assert_allclose(diff, 0.0, atol=1e-3)
 
 
 async def test_sps_copies_output_vars(emulator_factory: Any) -> None:
@@ -165,5 +168,6 @@ def test_cli_options_reach_the_config() -> None:
     cfg = config_from_args(args)
     assert (cfg.program, cfg.speed, cfg.ipo, cfg.robot) == ("cart_path", 5.0, 0.004, False)
     assert config_from_args(build_parser().parse_args([])).robot is True
-    with pytest.raises(SystemExit):
-        build_parser().parse_args(["--program", "nope"])
+    # a program is a shipped name or a .src file: anything else is a usage error
+    with pytest.raises(ValueError, match="unknown program"):
+        config_from_args(build_parser().parse_args(["--program", "nope"]))
