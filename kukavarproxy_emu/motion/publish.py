@@ -103,8 +103,10 @@ class Publisher:
         store = self.store
         store.set_system("$AXIS_ACT", E6Axis.from_numpy(np.concatenate([q, _E6])))
         store.set_system("$AXIS_ACT_MEAS", E6Axis.from_numpy(np.concatenate([q_meas, _E6])))
-        store.set_system("$POS_ACT", self._pos(q, tool, base))
-        store.set_system("$POS_ACT_MES", self._pos(q_meas, tool, base))
+        pos = self._pos(q, tool, base)
+        store.set_system("$POS_ACT", pos)
+        # without measurement noise the measured pose is the set-point pose: one FK, not two
+        store.set_system("$POS_ACT_MES", pos if q_meas is q else self._pos(q_meas, tool, base))
         store.set_system("$VEL_AXIS_ACT", [*(self.qd / model.max_speed * 100.0), *_E6])
         store.set_system("$TORQUE_AXIS_ACT", [*torque, *_E6])
         store.set_system("$VEL_ACT", vel_tcp)
