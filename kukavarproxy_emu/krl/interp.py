@@ -13,8 +13,9 @@ reads its target only then, so the target is captured when the motion is planned
 queued nor an active motion: the advance-run stop. Approximation therefore only happens when
 the next motion was planned in time, which the kernel decides.
 
-**Budget.** At most :attr:`Interpreter.budget` statements run per cycle, so a ``LOOP`` of
-assignments only burns a bounded slice of each cycle and the server keeps answering. A motion
+**Budget.** At most :attr:`Interpreter.budget` statements, and at most ``TIME_BUDGET`` (2 ms)
+of wall time, run per cycle, so a ``LOOP`` of assignments only burns a bounded slice of each
+cycle and the server keeps answering promptly. A motion
 that completes at once (the robot already stands on its target) may run once per cycle
 before the loop yields, so ``LOOP PTP MYAXIS C_PTP ENDLOOP`` does not spin at rest.
 
@@ -25,6 +26,7 @@ cycle).
 
 from __future__ import annotations
 
+import time
 from collections.abc import Generator, Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -43,6 +45,9 @@ __all__ = ["DEFAULT_BUDGET", "Interpreter"]
 
 #: Statements per interpolation cycle before the interpreter yields to the event loop.
 DEFAULT_BUDGET = 2000
+#: Wall seconds of statements per cycle, whichever of the two limits comes first: a runaway loop
+#: then costs the server at most this much latency per cycle, however slow the statements are.
+TIME_BUDGET = 0.002
 #: A DEFFCT called from an expression runs to completion; beyond this it is a runaway.
 FUNCTION_LIMIT = 200_000
 
@@ -87,6 +92,7 @@ class Interpreter(MotionMixin):
         self.frames: list[Frame] = []
         self.ev = Evaluator(store, self.frames, self._call_function)
         self.count = 0  # statements this cycle
+        self._until = 0.0  # perf_counter() at which this cycle's time budget ends
         self.at_once = 0  # motions that completed at once this cycle
         self.total = 0  # statements since start (diagnostics, tests)
         self.finished = False
@@ -108,6 +114,7 @@ class Interpreter(MotionMixin):
         if self._gen is None or self.finished or self.halted:
             return
         self.count = self.at_once = 0
+        self._until = time.perf_counter() + TIME_BUDGET
         try:
             next(self._gen)
         except StopIteration:
@@ -133,7 +140,7 @@ class Interpreter(MotionMixin):
         """Count one statement; yield when this cycle's budget is used up."""
         self.count += 1
         self.total += 1
-        if self.count > self.budget:
+        if self.count > self.budget or (not self.count & 63 and time.perf_counter() > self._until):
             yield BUDGET
 
     def _advance_stop(self) -> Generator[str, None, None]:

@@ -189,7 +189,7 @@ async def test_runaway_loop_does_not_starve_the_server(
             t0 = time.perf_counter()
             await kvp.read("$AXIS_ACT")
             worst = max(worst, time.perf_counter() - t0)
-        assert worst < 0.25
+        assert worst < 0.1  # a cycle spends at most 2 ms on statements
         assert await kvp.read("$PRO_STATE1") == "#P_ACTIVE"
         a = int(await kvp.read("MYINT"))
         await asyncio.sleep(0.05)
