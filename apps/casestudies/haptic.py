@@ -48,7 +48,6 @@ from pyopenshowvar.kinematics import (
     jacobian,
     torques_to_wrench,
 )
-from pyopenshowvar.krl import Struct
 
 __all__ = ["HapticDevice", "Wall", "estimate_force", "operator_script", "run_haptic"]
 
@@ -139,14 +138,7 @@ def estimate_force(
 
 def _load(value: Any) -> Load | None:
     """$LOAD as a kinematics Load (None when no mass is declared)."""
-    if not isinstance(value, Struct):
-        return None
-    mass = float(value.get("M") or 0.0)  # type: ignore[arg-type]
-    cm = value.get("CM")
-    com = (0.0, 0.0, 0.0)
-    if isinstance(cm, Struct):
-        com = tuple(float(cm.get(k) or 0.0) for k in "XYZ")  # type: ignore[assignment,arg-type]
-    return Load(mass, com) if mass > 0.0 else None
+    return Load.from_krl(value)
 
 
 async def run_haptic(

@@ -54,15 +54,7 @@ class Publisher:
         return np.asarray(fk_matrix(self.model, q)[:3, 3], dtype=np.float64)
 
     def _load(self) -> Load | None:
-        load = self.store.get("$LOAD")
-        if not isinstance(load, Struct):
-            return None
-        mass = float(load.get("M") or 0.0)  # type: ignore[arg-type]
-        cm = load.get("CM")
-        com = (0.0, 0.0, 0.0)
-        if isinstance(cm, Struct):
-            com = tuple(float(cm.get(k) or 0.0) for k in "XYZ")  # type: ignore[assignment,arg-type]
-        return Load(mass, com) if mass > 0.0 else None
+        return Load.from_krl(self.store.get("$LOAD"))
 
     def wrench(self) -> FloatArray:
         """The external wrench EMU_WRENCH (N, Nm; TCP, $ROBROOT axes), zeros if undeclared."""

@@ -18,6 +18,7 @@ from functools import lru_cache
 import numpy as np
 import numpy.typing as npt
 
+from ..krl import Struct
 from .forward import link_frames
 from .frames import FloatArray
 from .jacobian import _damped_inverse_apply, scaled_jacobian
@@ -42,6 +43,26 @@ class Load:
         object.__setattr__(self, "com_mm", tuple(float(v) for v in self.com_mm))
         if len(self.com_mm) != 3:
             raise ValueError("load centre of mass is X, Y, Z in mm")
+
+    @classmethod
+    def from_krl(cls, value: object) -> Load | None:
+        """A ``$LOAD`` value (``{LOAD: M .., CM {FRAME: X .., Y .., Z ..}, J ..}``) as a Load.
+
+        None when it is not a struct or declares no mass (KUKA's "no load"); missing members
+        count as 0, as on a controller where they were never set.
+        """
+        if not isinstance(value, Struct):
+            return None
+        mass = _number(value.get("M"))
+        cm = value.get("CM")
+        com = (0.0, 0.0, 0.0)
+        if isinstance(cm, Struct):
+            com = (_number(cm.get("X")), _number(cm.get("Y")), _number(cm.get("Z")))
+        return cls(mass, com) if mass > 0.0 else None
+
+
+def _number(value: object) -> float:
+    return float(value) if isinstance(value, int | float) and not isinstance(value, bool) else 0.0
 
 
 @lru_cache(maxsize=32)
