@@ -40,6 +40,7 @@ __all__ = [
     "default_config_text",
     "load_default_config",
     "parse_dat",
+    "parse_declaration",
     "read_dat",
 ]
 
@@ -61,12 +62,17 @@ class DatSyntaxError(ValueError):
     """
 
     def __init__(self, message: str, *, filename: str, line: int, column: int, text: str) -> None:
-        super().__init__(f"{filename}:{line}:{column}: {message}: {text.strip()!r}")
+        super().__init__(self.format(message, filename, line, column, text))
         self.reason = message
         self.filename = filename
         self.line = line
         self.column = column
         self.text = text
+
+    @staticmethod
+    def format(message: str, filename: str, line: int, column: int, text: str) -> str:
+        """The message shown to the user; subclasses change only the layout."""
+        return f"{filename}:{line}:{column}: {message}: {text.strip()!r}"
 
 
 @dataclass(frozen=True, slots=True)
@@ -386,6 +392,16 @@ class _Parser:
             structs=tuple(self.structs),
             enums=tuple(self.enums),
         )
+
+
+def parse_declaration(raw: str, lineno: int, column: int, filename: str = "<src>") -> DatFile:
+    """Parse the one declaration (DECL, STRUC, ENUM...) starting at ``column`` (1-based) of a
+    source line: the KRL parser hands declaration lines inside a DEF to this same parser."""
+    parser = _Parser(filename)
+    line = _Line(raw, lineno, filename, _comment_start(raw))
+    line.pos = column - 1
+    parser.statement(line)
+    return parser.result()
 
 
 def parse_dat(text: str, filename: str = "<dat>") -> DatFile:

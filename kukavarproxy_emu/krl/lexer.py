@@ -14,22 +14,23 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
+from ..datfile import DatSyntaxError
+
 __all__ = ["KrlSyntaxError", "Token", "tokenize"]
 
 
-class KrlSyntaxError(ValueError):
+class KrlSyntaxError(DatSyntaxError):
     """A KRL syntax error; the message reads ``file:line:column: message`` followed by the
-    offending source line and a caret under the column, ready to show to the user."""
+    offending source line and a caret under the column, ready to show to the user.
 
-    def __init__(self, message: str, *, filename: str, line: int, column: int, text: str) -> None:
+    A subclass of the data-list parser's error (same fields), so one ``except`` catches a bad
+    declaration whichever file it came from."""
+
+    @staticmethod
+    def format(message: str, filename: str, line: int, column: int, text: str) -> str:
         source = text.rstrip("\r\n").expandtabs(1)
         caret = " " * max(column - 1, 0) + "^"
-        super().__init__(f"{filename}:{line}:{column}: {message}\n    {source}\n    {caret}")
-        self.reason = message
-        self.filename = filename
-        self.line = line
-        self.column = column
-        self.text = text
+        return f"{filename}:{line}:{column}: {message}\n    {source}\n    {caret}"
 
 
 @dataclass(frozen=True, slots=True)

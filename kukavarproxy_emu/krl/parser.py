@@ -211,15 +211,11 @@ class _Parser(MotionParser):
         """Hand the whole line to the data-list parser: one declaration syntax everywhere."""
         token = self.tok
         raw = self.lines[token.line - 1]
-        parser = datfile._Parser(self.filename)
-        line = datfile._Line(raw, token.line, self.filename, datfile._comment_start(raw))
-        line.pos = token.column - 1
         try:
-            parser.statement(line)
+            result = datfile.parse_declaration(raw, token.line, token.column, self.filename)
         except datfile.DatSyntaxError as exc:
             raise KrlSyntaxError(exc.reason, filename=self.filename, line=exc.line,
                                  column=exc.column, text=raw) from None  # fmt: skip
-        result = parser.result()
         self.skip_line()
         where = {"line": token.line, "column": token.column}
         if result.structs:
