@@ -304,6 +304,14 @@ class VariableStore:
         """All variable names, sorted (arrays without brackets), for tab completion."""
         return sorted({*self._vars, *self._info})
 
+    def declaration(self, base: str) -> Var | None:
+        """The declared variable ``base`` (upper-case, no index): type, dimensions, flags.
+
+        The KRL interpreter needs the declared type to convert values as KRL does (REAL to INT
+        rounds) before the store validates them. None when ``base`` is not declared.
+        """
+        return self._vars.get(base)
+
     def is_read_only(self, name: str) -> bool:
         """Whether KUKAVARPROXY writes to ``name`` (or any part of it) are refused."""
         path = parse_name(name)

@@ -118,9 +118,7 @@ def render(expr: ast.Expr, index: Callable[[ast.Expr], str] | None = None) -> st
 
 def _var(store: VariableStore, base: str) -> Var | None:
     """The declared variable ``base`` of ``store`` (type, dimensions), None if undeclared."""
-    # The store has no public per-variable type query; the runtime needs the declared type
-    # to convert values as KRL does (REAL -> INT rounds) before the store checks them.
-    return store._vars.get(base)
+    return store.declaration(base)
 
 
 def is_number(value: object) -> bool:
