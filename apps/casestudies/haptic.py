@@ -136,11 +136,6 @@ def estimate_force(
     return np.asarray(np.linalg.solve(lhs, a.T @ (MODEL.torque_sign * tau_ext)), float)
 
 
-def _load(value: Any) -> Load | None:
-    """$LOAD as a kinematics Load (None when no mass is declared)."""
-    return Load.from_krl(value)
-
-
 async def run_haptic(
     client: Any,
     *,
@@ -165,7 +160,7 @@ async def run_haptic(
     touching real things: no ground truth, errors are NaN).
     """
     clock = Clock(time_scale)
-    load = _load(await client.read_value("$LOAD"))
+    load = Load.from_krl(await client.read_value("$LOAD"))
     q = await client.read_joint_angles()
     x0 = np.asarray(forward(MODEL, q), float)[:3]
     wall = wall if wall is not None else Wall(0, x0[0] + 30.0)

@@ -53,9 +53,6 @@ class Publisher:
     def _tcp_position(self, q: FloatArray) -> FloatArray:
         return np.asarray(fk_matrix(self.model, q)[:3, 3], dtype=np.float64)
 
-    def _load(self) -> Load | None:
-        return Load.from_krl(self.store.get("$LOAD"))
-
     def wrench(self) -> FloatArray:
         """The external wrench EMU_WRENCH (N, Nm; TCP, $ROBROOT axes), zeros if undeclared."""
         if not self._has_wrench:
@@ -85,7 +82,7 @@ class Publisher:
         wrench = self.wrench()
         model, q = self.model, self.q
         q_meas = q + self._rng.normal(0.0, self.noise, 6) if self.noise else q
-        torque = gravity_torques(model, q, self._load())
+        torque = gravity_torques(model, q, Load.from_krl(self.store.get("$LOAD")))
         torque = torque + model.torque_sign * self.inertia * np.radians(self.qdd)
         if np.any(wrench):
             torque = torque + wrench_to_torques(model, q, wrench, tool)
