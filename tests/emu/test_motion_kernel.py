@@ -356,3 +356,25 @@ def test_consecutive_exact_lins_lose_no_motion() -> None:
             break
     final = forward(KR6R900SIXX, kernel.q)
     np.testing.assert_allclose(final[:3], points[-1][:3], atol=1e-3)
+
+
+async def test_clock_poll_runs_a_due_tick_once() -> None:
+    # The server polls the clock before answering a batch: a due tick runs right there, and
+    # the clock's own timer must not run the same tick a second time.
+    import asyncio
+    import time as _time
+
+    from kukavarproxy_emu.motion import IpoClock
+
+    calls: list[float] = []
+    clock = IpoClock(lambda: calls.append(_time.monotonic()), ipo=0.05)
+    clock.start()
+    await asyncio.sleep(0)  # the clock task sets its first deadline
+    clock.poll()
+    assert calls == []  # not due yet
+    _time.sleep(0.06)  # noqa: ASYNC251 - the loop must be busy past the deadline, on purpose
+    clock.poll()
+    assert len(calls) == 1 and clock.ticks == 1
+    await asyncio.sleep(0.02)  # the timer wakes for the old deadline: nothing more to do
+    assert clock.ticks == 1
+    await clock.stop()
