@@ -75,6 +75,7 @@ app = typer.Typer(
 
 @app.callback()
 def _global(
+    ctx: typer.Context,
     host: Annotated[
         str, typer.Option("--host", "-H", envvar="KVP_HOST", help="Proxy address.")
     ] = "127.0.0.1",
@@ -89,7 +90,7 @@ def _global(
     Opts.host, Opts.port, Opts.timeout = host, port, timeout
     Opts.emulator = None
     if emulate:
-        start_embedded_emulator()
+        start_embedded_emulator(ctx)
 
 
 @app.command()

@@ -62,20 +62,27 @@ class Opts:
         return f"{cls.host}:{cls.port}"
 
 
-def start_embedded_emulator() -> Any:
+def start_embedded_emulator(ctx: typer.Context) -> Any:
     """An in-process emulator on an ephemeral port, stopped when the command ends.
 
     Idempotent: ``kvp --emulate monitor --emulate`` starts one emulator only.
     """
     if Opts.emulator is not None:
         return Opts.emulator
-    import atexit
-
     from kukavarproxy_emu import EmulatorConfig, EmulatorThread
 
     thread = EmulatorThread(EmulatorConfig(host="127.0.0.1", port=0))
     thread.start()
-    atexit.register(thread.stop)
+
+    def stop() -> None:
+        thread.stop()
+        if Opts.emulator is thread:
+            Opts.emulator = None
+
+    # Stop it when the command ends, not at interpreter exit: the CLI also runs in-process
+    # (typer's CliRunner, scripts calling the app), where an atexit hook would leave the
+    # emulator and its robot ticking in a background thread for the rest of the process.
+    ctx.find_root().call_on_close(stop)
     Opts.emulator = thread
     Opts.host, Opts.port = "127.0.0.1", thread.port
     return thread

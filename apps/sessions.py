@@ -17,6 +17,7 @@ from pyopenshowvar import KvpError
 
 
 def repl(
+    ctx: typer.Context,
     emulate: Annotated[
         bool, typer.Option("--emulate", help="Start an embedded emulator and talk to it.")
     ] = False,
@@ -34,7 +35,7 @@ def repl(
 ) -> None:
     """Interactive console: NAME reads, NAME VALUE writes, :watch, :help, :quit (Tab completes)."""
     if emulate:
-        start_embedded_emulator()
+        start_embedded_emulator(ctx)
     from apps.names import completion_names
     from apps.repl import default_history_path, run_repl
 
@@ -59,6 +60,7 @@ def repl(
 
 
 def monitor(
+    ctx: typer.Context,
     emulate: Annotated[
         bool,
         typer.Option("--emulate", help="Start an embedded emulator (a live robot, no hardware)."),
@@ -77,7 +79,7 @@ def monitor(
     if not 0 < hz <= 50:
         fail(EXIT_USAGE, f"--hz must be in (0, 50], got {hz:g}")
     if emulate:
-        start_embedded_emulator()
+        start_embedded_emulator(ctx)
     from apps.monitor.app import MonitorApp
     from apps.monitor.watchlist import default_watch_file
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import socket
+import threading
 from typing import Any
 
 from typer.testing import CliRunner
@@ -87,3 +88,5 @@ def test_embedded_emulator() -> None:
     res = run("--emulate", "read", "$TORQUE_AXIS_ACT[]")
     assert res.exit_code == 0, res.output
     assert res.stdout.startswith("0.0 -24.7800 -25.5000")
+    # the embedded emulator stops with the command, even when the CLI runs in-process
+    assert not [t for t in threading.enumerate() if t.name == "kukavarproxy-emu"]
