@@ -7,9 +7,8 @@ import socket
 import threading
 from typing import Any
 
+from pyopenshowvar_apps.cli import EXIT_CONNECTION, EXIT_TIMEOUT, EXIT_VARIABLE, app
 from typer.testing import CliRunner
-
-from apps.cli import EXIT_CONNECTION, EXIT_TIMEOUT, EXIT_VARIABLE, app
 
 runner = CliRunner()
 

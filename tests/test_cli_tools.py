@@ -10,9 +10,9 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from pyopenshowvar_apps.cli import EXIT_CONNECTION, EXIT_TIMEOUT, EXIT_USAGE, EXIT_VARIABLE, app
 from typer.testing import CliRunner
 
-from apps.cli import EXIT_CONNECTION, EXIT_TIMEOUT, EXIT_USAGE, EXIT_VARIABLE, app
 from kukavarproxy_emu import EmulatorThread
 from kukavarproxy_emu.faults import Fault
 from kukavarproxy_emu.testing import TEST_CONFIG

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import time
 
+from pyopenshowvar_apps.cli import app
 from typer.testing import CliRunner
-
-from apps.cli import app
 
 
 def test_demo_quick_linefollow_prints_table(tmp_path) -> None:

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from pyopenshowvar_apps.casestudies.haptic import HapticDevice, Wall, estimate_force, run_haptic
 
-from apps.casestudies.haptic import HapticDevice, Wall, estimate_force, run_haptic
 from pyopenshowvar import Client
 from pyopenshowvar.kinematics import KR6R900SIXX as KR6
 from pyopenshowvar.kinematics import Load, gravity_torques, wrench_to_torques

@@ -6,10 +6,15 @@ import itertools
 
 import numpy as np
 import pytest
+from pyopenshowvar_apps.casestudies import linefollow_vision as vision
+from pyopenshowvar_apps.casestudies.linefollow import (
+    Table,
+    camera_pose,
+    parked_store,
+    run_line_following,
+)
+from pyopenshowvar_apps.casestudies.lineimage import generate_line_image, load_centreline
 
-from apps.casestudies import linefollow_vision as vision
-from apps.casestudies.linefollow import Table, camera_pose, parked_store, run_line_following
-from apps.casestudies.lineimage import generate_line_image, load_centreline
 from kukavarproxy_emu import Emulator, EmulatorConfig
 from pyopenshowvar import Client
 

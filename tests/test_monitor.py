@@ -12,13 +12,12 @@ import pytest
 
 pytest.importorskip("textual")
 
+from pyopenshowvar_apps.monitor.app import MonitorApp
+from pyopenshowvar_apps.monitor.dialogs import ConfirmDialog, InputDialog
+from pyopenshowvar_apps.monitor.state import RobotState
+from pyopenshowvar_apps.monitor.watchlist import WatchList
+from pyopenshowvar_apps.names import is_motion_variable
 from textual.widgets import DataTable, Input
-
-from apps.monitor.app import MonitorApp
-from apps.monitor.dialogs import ConfirmDialog, InputDialog
-from apps.monitor.state import RobotState
-from apps.monitor.watchlist import WatchList
-from apps.names import is_motion_variable
 
 
 async def until(pilot: Any, cond: Callable[[], bool], timeout: float = 5.0) -> None:

@@ -9,8 +9,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from pyopenshowvar_apps.repl import split_command
 
-from apps.repl import split_command
 from kukavarproxy_emu import EmulatorThread
 from kukavarproxy_emu.testing import TEST_CONFIG
 

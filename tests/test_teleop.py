@@ -7,8 +7,7 @@ import itertools
 
 import numpy as np
 import pytest
-
-from apps.casestudies.devices import (
+from pyopenshowvar_apps.casestudies.devices import (
     CENTRE,
     Clock,
     ScriptedDevice,
@@ -20,8 +19,14 @@ from apps.casestudies.devices import (
     step,
     write_csv_trajectory,
 )
-from apps.casestudies.pid import JointPID
-from apps.casestudies.teleop import dead_zone, position_target, run_teleoperation, velocity_target
+from pyopenshowvar_apps.casestudies.pid import JointPID
+from pyopenshowvar_apps.casestudies.teleop import (
+    dead_zone,
+    position_target,
+    run_teleoperation,
+    velocity_target,
+)
+
 from pyopenshowvar import Client
 
 

@@ -18,8 +18,8 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from apps.common import EXIT_USAGE, fail, fail_for, flatten, make_client
 from pyopenshowvar import KvpConnectionError, KvpError, KvpTimeoutError
+from pyopenshowvar_apps.common import EXIT_USAGE, fail, fail_for, flatten, make_client
 
 if TYPE_CHECKING:
     from rich.table import Table

@@ -12,8 +12,8 @@ from typing import Annotated
 
 import typer
 
-from apps.common import EXIT_USAGE, Opts, fail, fail_for, start_embedded_emulator
 from pyopenshowvar import KvpError
+from pyopenshowvar_apps.common import EXIT_USAGE, Opts, fail, fail_for, start_embedded_emulator
 
 
 def repl(
@@ -36,8 +36,8 @@ def repl(
     """Interactive console: NAME reads, NAME VALUE writes, :watch, :help, :quit (Tab completes)."""
     if emulate:
         start_embedded_emulator(ctx)
-    from apps.names import completion_names
-    from apps.repl import default_history_path, run_repl
+    from pyopenshowvar_apps.names import completion_names
+    from pyopenshowvar_apps.repl import default_history_path, run_repl
 
     store = Opts.emulator.store if Opts.emulator is not None else None
     try:
@@ -80,8 +80,8 @@ def monitor(
         fail(EXIT_USAGE, f"--hz must be in (0, 50], got {hz:g}")
     if emulate:
         start_embedded_emulator(ctx)
-    from apps.monitor.app import MonitorApp
-    from apps.monitor.watchlist import default_watch_file
+    from pyopenshowvar_apps.monitor.app import MonitorApp
+    from pyopenshowvar_apps.monitor.watchlist import default_watch_file
 
     app = MonitorApp(
         Opts.host,

@@ -38,8 +38,6 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from apps.casestudies.common import CaseResult, new_figure, output_dir, save_figure, write_csv
-from apps.casestudies.devices import Clock
 from pyopenshowvar.kinematics import (
     KR6R900SIXX,
     Load,
@@ -48,6 +46,14 @@ from pyopenshowvar.kinematics import (
     jacobian,
     torques_to_wrench,
 )
+from pyopenshowvar_apps.casestudies.common import (
+    CaseResult,
+    new_figure,
+    output_dir,
+    save_figure,
+    write_csv,
+)
+from pyopenshowvar_apps.casestudies.devices import Clock
 
 __all__ = ["HapticDevice", "Wall", "estimate_force", "operator_script", "run_haptic"]
 

@@ -8,12 +8,18 @@ plus the CSV / PNG files it wrote). ``kvp demo`` runs them all on an embedded em
 * :mod:`apps.casestudies.lineimage` — generator of synthetic line images with ground truth.
 * ``apps.casestudies.teleop`` / ``apps.casestudies.haptic`` — teleoperation and haptic control.
 
-Submodules are not imported here so that ``import apps.casestudies`` stays cheap (matplotlib
+Submodules are not imported here so that ``import pyopenshowvar_apps.casestudies`` stays cheap (matplotlib
 and scipy load only when a case study runs).
 """
 
 from __future__ import annotations
 
-from apps.casestudies.common import CaseResult, output_dir, save_plot, summary_table, write_csv
+from pyopenshowvar_apps.casestudies.common import (
+    CaseResult,
+    output_dir,
+    save_plot,
+    summary_table,
+    write_csv,
+)
 
 __all__ = ["CaseResult", "output_dir", "save_plot", "summary_table", "write_csv"]

@@ -33,9 +33,6 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from apps.casestudies.common import CaseResult, new_figure, output_dir, save_figure, write_csv
-from apps.casestudies.devices import Clock, HandDevice, HandSample, ScriptedDevice, figure_eight
-from apps.casestudies.pid import JointPID
 from pyopenshowvar.kinematics import (
     KR6R900SIXX,
     UnreachableError,
@@ -44,6 +41,21 @@ from pyopenshowvar.kinematics import (
     forward,
     inverse,
 )
+from pyopenshowvar_apps.casestudies.common import (
+    CaseResult,
+    new_figure,
+    output_dir,
+    save_figure,
+    write_csv,
+)
+from pyopenshowvar_apps.casestudies.devices import (
+    Clock,
+    HandDevice,
+    HandSample,
+    ScriptedDevice,
+    figure_eight,
+)
+from pyopenshowvar_apps.casestudies.pid import JointPID
 
 __all__ = [
     "DEAD_ZONE",

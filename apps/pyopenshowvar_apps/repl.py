@@ -24,7 +24,6 @@ from typing import Any
 from rich.console import Console
 from rich.text import Text
 
-from apps.pretty import render_text
 from pyopenshowvar import (
     Client,
     KvpConnectionError,
@@ -33,6 +32,7 @@ from pyopenshowvar import (
     UnknownVariableError,
     WriteRefusedError,
 )
+from pyopenshowvar_apps.pretty import render_text
 
 HELP = """\
 [bold]NAME[/]                read a variable, e.g. [cyan]$AXIS_ACT[/], [cyan]$TORQUE_AXIS_ACT[][/], [cyan]MYE6ARRAY[2].A1[/]
@@ -236,7 +236,7 @@ class Repl:
         from prompt_toolkit import PromptSession
         from prompt_toolkit.history import FileHistory
 
-        from apps.completion import NameCompleter
+        from pyopenshowvar_apps.completion import NameCompleter
 
         history.parent.mkdir(parents=True, exist_ok=True)
         session: PromptSession[str] = PromptSession(

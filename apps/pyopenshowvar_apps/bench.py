@@ -18,8 +18,8 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from apps.common import EXIT_USAGE, fail, run
 from pyopenshowvar import AccessStats
+from pyopenshowvar_apps.common import EXIT_USAGE, fail, run
 
 if TYPE_CHECKING:
     from rich.console import Console

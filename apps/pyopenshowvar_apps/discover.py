@@ -18,7 +18,7 @@ from typing import Annotated
 
 import typer
 
-from apps.common import EXIT_CONNECTION, fail
+from pyopenshowvar_apps.common import EXIT_CONNECTION, fail
 
 QUERY = b"WHEREAREYOU?"
 

@@ -26,14 +26,15 @@ from typing import Annotated, Any
 
 import typer
 
-from apps import bench as _bench
-from apps import demo as _demo
-from apps import discover as _discover
-from apps import live as _live
-from apps import sessions as _sessions
-from apps.casestudies import linefollow_cli as _linefollow
-from apps.casestudies import teleop_cli as _teleop_cli
-from apps.common import (
+from pyopenshowvar import Client
+from pyopenshowvar_apps import bench as _bench
+from pyopenshowvar_apps import demo as _demo
+from pyopenshowvar_apps import discover as _discover
+from pyopenshowvar_apps import live as _live
+from pyopenshowvar_apps import sessions as _sessions
+from pyopenshowvar_apps.casestudies import linefollow_cli as _linefollow
+from pyopenshowvar_apps.casestudies import teleop_cli as _teleop_cli
+from pyopenshowvar_apps.common import (
     EXIT_CONNECTION,
     EXIT_INTERRUPTED,
     EXIT_OK,
@@ -46,7 +47,6 @@ from apps.common import (
     start_embedded_emulator,
     to_jsonable,
 )
-from pyopenshowvar import Client
 
 __all__ = [
     "EXIT_CONNECTION",

@@ -23,7 +23,7 @@ from typing import Annotated, Any
 import typer
 from rich.console import Console
 
-from apps.casestudies.common import CaseResult, output_dir, summary_table
+from pyopenshowvar_apps.casestudies.common import CaseResult, output_dir, summary_table
 
 __all__ = ["demo", "run_demo"]
 
@@ -49,8 +49,13 @@ def _with_emulator(
 
 
 def _line_following(out: Path, speed: float, quick: bool) -> CaseResult:
-    from apps.casestudies.linefollow import Table, camera_pose, parked_store, run_line_following
-    from apps.casestudies.lineimage import generate_line_image
+    from pyopenshowvar_apps.casestudies.linefollow import (
+        Table,
+        camera_pose,
+        parked_store,
+        run_line_following,
+    )
+    from pyopenshowvar_apps.casestudies.lineimage import generate_line_image
 
     size = (320, 240) if quick else (640, 480)
     img = generate_line_image(
@@ -97,12 +102,12 @@ CASE_STUDIES: list[tuple[str, str, Callable[[Path, float, bool], CaseResult]]] =
     (
         "teleop",
         "teleoperation",
-        _optional("apps.casestudies.teleop", "run_teleoperation", "ext_move_axis", "teleoperation"),
+        _optional("pyopenshowvar_apps.casestudies.teleop", "run_teleoperation", "ext_move_axis", "teleoperation"),
     ),
     (
         "haptic",
         "haptic feedback",
-        _optional("apps.casestudies.haptic", "run_haptic", "actuator", "haptic feedback"),
+        _optional("pyopenshowvar_apps.casestudies.haptic", "run_haptic", "actuator", "haptic feedback"),
     ),
 ]
 

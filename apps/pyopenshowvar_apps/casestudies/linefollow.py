@@ -26,11 +26,17 @@ from typing import Any
 
 import numpy as np
 
-from apps.casestudies import linefollow_vision as vision
-from apps.casestudies.common import CaseResult, new_figure, output_dir, save_figure, write_csv
 from pyopenshowvar import Client
 from pyopenshowvar.kinematics import KR6R900SIXX, RobotModel, UnreachableError, inverse
 from pyopenshowvar.krl import E6Pos
+from pyopenshowvar_apps.casestudies import linefollow_vision as vision
+from pyopenshowvar_apps.casestudies.common import (
+    CaseResult,
+    new_figure,
+    output_dir,
+    save_figure,
+    write_csv,
+)
 
 __all__ = [
     "DEFAULT_TABLE_POSE",

@@ -19,9 +19,9 @@ __all__ = ["haptic", "teleop"]
 def _run(program: str, sim: bool, job: Any) -> Any:
     from rich.console import Console
 
-    from apps.casestudies.common import summary_table
-    from apps.common import Opts, fail_for
     from pyopenshowvar import Client, KvpError
+    from pyopenshowvar_apps.casestudies.common import summary_table
+    from pyopenshowvar_apps.common import Opts, fail_for
 
     thread = None
     host, port = Opts.host, Opts.port
@@ -62,8 +62,8 @@ def teleop(
     sim: Annotated[bool, typer.Option("--sim", help="Run against an in-process emulator.")] = False,
 ) -> None:
     """Case study 3: teleoperate with a hand device (custom IK + PID → MYAXIS)."""
-    from apps.casestudies import devices as dev
-    from apps.casestudies.teleop import run_teleoperation
+    from pyopenshowvar_apps.casestudies import devices as dev
+    from pyopenshowvar_apps.casestudies.teleop import run_teleoperation
 
     scripts = {"figure8": dev.figure_eight(), "circle": dev.circle(), "step": dev.step()}
     hand: dev.HandDevice
@@ -95,7 +95,7 @@ def haptic(
     sim: Annotated[bool, typer.Option("--sim", help="Run against an in-process emulator.")] = False,
 ) -> None:
     """Case study 4: haptic force feedback through MYPOS / ACTUATOR and $TORQUE_AXIS_ACT."""
-    from apps.casestudies.haptic import run_haptic
+    from pyopenshowvar_apps.casestudies.haptic import run_haptic
 
     _run(
         "actuator",

@@ -41,11 +41,16 @@ def linefollow(
 
     from rich.console import Console
 
-    from apps.casestudies.common import output_dir, summary_table
-    from apps.casestudies.linefollow import Table, camera_pose, parked_store, run_line_following
-    from apps.casestudies.lineimage import generate_line_image
-    from apps.common import Opts, fail_for
     from pyopenshowvar import Client
+    from pyopenshowvar_apps.casestudies.common import output_dir, summary_table
+    from pyopenshowvar_apps.casestudies.linefollow import (
+        Table,
+        camera_pose,
+        parked_store,
+        run_line_following,
+    )
+    from pyopenshowvar_apps.casestudies.lineimage import generate_line_image
+    from pyopenshowvar_apps.common import Opts, fail_for
 
     def pixel(text: str | None) -> tuple[int, int] | None:
         if text is None:
@@ -62,8 +67,8 @@ def linefollow(
     host, port, scale_t = Opts.host, Opts.port, 1.0
     emu: Any = None
     if emulate:
-        from apps.casestudies.linefollow_vision import load_gray
         from kukavarproxy_emu import EmulatorConfig, EmulatorThread
+        from pyopenshowvar_apps.casestudies.linefollow_vision import load_gray
 
         h, w = load_gray(str(image)).shape
         store = parked_store(camera_pose(Table(w, h, scale, pose)))  # type: ignore[arg-type]

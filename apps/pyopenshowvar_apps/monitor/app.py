@@ -20,8 +20,8 @@ from textual.binding import Binding, BindingType
 from textual.containers import Horizontal, Vertical
 from textual.widgets import DataTable, Footer, Static, TabbedContent, TabPane
 
-from apps.names import is_motion_variable
 from pyopenshowvar import Client, KvpConnectionError, KvpError, KvpTimeoutError
+from pyopenshowvar_apps.names import is_motion_variable
 
 from .dialogs import ConfirmDialog, InputDialog
 from .state import RobotState
