@@ -5,6 +5,12 @@
 echo the value with a failure status, ``PING`` answers ``PONG``, modes 2/3 pack 16-bit words.
 ``strict`` switches the failures to C3 Bridge's ``00 00 00`` tail. Kept apart from the sockets
 so it can be tested and reused (the KRL interpreter's tests drive it directly).
+
+Every value read goes through :func:`extract_variable_value`, KVP's ``ExtractVariableValue``
+(basMain.bas): the store prints what the KRC's CrossComm ``ShowVar`` prints (a whole array
+``NAME[]`` with a trailing space), and KVP trims the spaces off before they reach the wire.
+:meth:`Responder.show_var` and :meth:`Responder.set_var` are the two CrossComm calls on their
+own, for the wire-faithful ``kvp9`` connection (:mod:`kukavarproxy_emu.kvp9`).
 """
 
 from __future__ import annotations
@@ -18,7 +24,7 @@ from .config import EmulatorConfig
 from .latency import Kind
 from .store import UnknownVariable, VariableStore, WriteRefused
 
-__all__ = ["Responder", "build_store"]
+__all__ = ["Responder", "build_store", "extract_variable_value"]
 
 log = logging.getLogger(__name__)
 
@@ -36,6 +42,17 @@ def _to_word(token: str) -> int:
     except ValueError:
         value = round(float(token))  # ValueError / OverflowError for non-numbers
     return value & 0xFFFF
+
+
+def extract_variable_value(name: str, shown: str) -> str:
+    """KVP's ``ExtractVariableValue(name & "=" & shown)``: the text after the first ``=``, trimmed.
+
+    VB's ``Trim`` removes spaces only (not tabs or newlines). The first ``=`` may sit inside
+    ``name`` when the name is an expression; the store answers those as unknown, but the rule is
+    kept whole so that the two can never disagree.
+    """
+    full = f"{name}={shown}"
+    return full[full.index("=") + 1 :].strip(" ")
 
 
 def build_store(config: EmulatorConfig) -> VariableStore:
@@ -94,16 +111,24 @@ class Responder:
             return Reply(msg_id, mode, b"", 0, _STRICT_CODE)
         return Reply(msg_id, mode, value if len(value) <= _MAX_VALUE else b"", 0)
 
-    def _lookup(self, name: str) -> str | None:
-        if self.ping and name == "PING":  # exact and case-sensitive, as in KVP 9.0
-            return "PONG"
+    def show_var(self, name: str) -> str | None:
+        """basMain ``ShowVar``: the trimmed value, or None where CrossComm raises (unknown)."""
         try:
-            return self.store.read(name)
+            return extract_variable_value(name, self.store.read(name))
         except UnknownVariable:
             return None
         except Exception:  # a store bug must cost one reply, not the connection
             log.warning("store.read(%r) failed", name, exc_info=True)
             return None
+
+    def set_var(self, name: str, text: str) -> bool:
+        """basMain ``SetVar``: True when the write was applied."""
+        return self._write(name, text)
+
+    def _lookup(self, name: str) -> str | None:
+        if self.ping and name == "PING":  # exact and case-sensitive, as in KVP 9.0
+            return "PONG"
+        return self.show_var(name)
 
     def _write(self, name: str, text: str) -> bool:
         try:

@@ -4,7 +4,8 @@
   untyped partial aggregates ``{X 1.5, Z 3.0}`` kept untyped so that KRL leaves the other
   members alone.
 * :func:`format_krc4` — byte-identical to what a KRC4 PRINTS on a read (REAL as float32 via
-  ``%#.6g``/``%#.9g``, whole arrays with a trailing space); the emulator answers with it.
+  ``%#.6g``/``%#.9g``, whole arrays with a trailing space); the emulator's store prints with it
+  and, like KUKAVARPROXY, trims the value before it goes on the wire.
 
 Both are locale independent and both round-trip through :func:`~.parse.parse_value`.
 """

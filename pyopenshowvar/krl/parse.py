@@ -272,8 +272,9 @@ def parse_value(
 def parse_array(
     text: str, elem_type: str | None = None, *, registry: TypeRegistry | None = None
 ) -> list[KrlValue] | str:
-    """Parse the reply to a whole-array read ``NAME[]``: elements separated by spaces, usually
-    with a trailing space. A CHAR array comes back quoted and is returned as its text (str).
+    """Parse the reply to a whole-array read ``NAME[]``: elements separated by spaces (a KRC
+    prints a trailing space, KUKAVARPROXY trims it; both are accepted). A CHAR array comes back
+    quoted and is returned as its text (str).
 
     ``elem_type`` is the element type (``"REAL"``; ``"REAL[]"`` is accepted too).
     """
