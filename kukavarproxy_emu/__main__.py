@@ -16,7 +16,14 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from .config import DEFAULT_PORT, DEFAULT_UDP_PORT, KNOWN_QUIRKS, ROBOT_PROGRAMS, EmulatorConfig
+from .config import (
+    DEFAULT_PORT,
+    DEFAULT_UDP_PORT,
+    KNOWN_QUIRKS,
+    ROBOT_PROGRAMS,
+    WIRES,
+    EmulatorConfig,
+)
 from .faults import Fault
 from .latency import PROFILES
 from .server import Emulator
@@ -69,6 +76,13 @@ def build_parser() -> argparse.ArgumentParser:
     beh.add_argument("--seed", type=int, default=None, help="seed of the latency sampler")
     beh.add_argument(
         "--strict", action="store_true", help="C3 Bridge style failures (tail 00 00 00)"
+    )
+    beh.add_argument(
+        "--wire",
+        default="robust",
+        choices=WIRES,
+        help="robust (default): reassemble requests, close on garbage; kvp9: parse every"
+        " 2048-byte read on its own, byte for byte like KUKAVARPROXY 9.0",
     )
     beh.add_argument(
         "--quirks",
@@ -132,6 +146,7 @@ def config_from_args(args: argparse.Namespace) -> EmulatorConfig:
         seed=args.seed,
         strict=args.strict,
         quirks=quirks,
+        wire=args.wire,
         udp_port=args.udp_port,
         udp_reply_port=args.udp_reply_port,
         discovery=args.discovery,

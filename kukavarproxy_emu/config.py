@@ -15,13 +15,17 @@ from pyopenshowvar.protocol import MAX_FRAME
 from .faults import Fault
 from .latency import LatencyProfile, resolve_profile
 
-__all__ = ["DEFAULT_PORT", "KNOWN_QUIRKS", "ROBOT_PROGRAMS", "EmulatorConfig"]
+__all__ = ["DEFAULT_PORT", "KNOWN_QUIRKS", "ROBOT_PROGRAMS", "WIRES", "EmulatorConfig"]
 
 DEFAULT_PORT = 7000
 DEFAULT_UDP_PORT = 6999
 #: ``legacy-ids``: pre-9.0 bug, every reply to one TCP read carries the first request's id.
 #: ``no-ping``: pre-9.0 proxies pass ``PING`` to CrossComm, so it reads as an unknown variable.
 KNOWN_QUIRKS = frozenset({"legacy-ids", "no-ping"})
+#: ``robust``: requests are reassembled across TCP reads and garbage closes the connection.
+#: ``kvp9``: every read of at most 2048 bytes is parsed on its own, exactly as KUKAVARPROXY 9.0's
+#: source does, malformed input included (docs/emulator.md, "Wire-faithful mode").
+WIRES = ("robust", "kvp9")
 #: ``--program`` names of the shipped KRL programs (kept here so the config does not import
 #: numpy-heavy motion code; ``kukavarproxy_emu.motion.PROGRAMS`` has the same keys, a test
 #: checks it). Any other ``--program`` is the path of a ``.src`` file.
@@ -55,6 +59,8 @@ class EmulatorConfig:
     #: C3 Bridge style failures (tail 00 00 00, empty value) for unknown reads and refused writes.
     strict: bool = False
     quirks: frozenset[str] = frozenset()
+    #: How the byte stream is framed and parsed: "robust" or "kvp9" (see WIRES).
+    wire: str = "robust"
     #: UDP discovery: listen port, the port answers go to (0: the sender's port) and the switch
     #: (None: on unless the TCP port is ephemeral).
     udp_port: int = DEFAULT_UDP_PORT
@@ -103,6 +109,11 @@ class EmulatorConfig:
         if unknown:
             raise ValueError(f"unknown quirks {sorted(unknown)} (known: {sorted(KNOWN_QUIRKS)})")
         object.__setattr__(self, "quirks", frozenset(self.quirks))
+        if self.wire not in WIRES:
+            raise ValueError(f"unknown wire {self.wire!r} (choose from {', '.join(WIRES)})")
+        if self.wire == "kvp9" and self.strict:
+            # strict is C3 Bridge's failure tail; C3 Bridge frames like the robust mode
+            raise ValueError("--strict (C3 Bridge failures) cannot be combined with --wire kvp9")
         object.__setattr__(self, "config_files", tuple(Path(p) for p in self.config_files))
         resolve_profile(self.latency)  # fail early on a bad profile name
 

@@ -7,6 +7,8 @@ Layers, top down:
 * ``_Connection`` — one :class:`asyncio.BufferedProtocol` per client: reads at most
   ``READ_SIZE`` bytes at a time into its own buffer, reassembles frames with
   :class:`~pyopenshowvar.protocol.RequestDecoder` and answers them in order;
+* ``Kvp9Connection`` (:mod:`kukavarproxy_emu.kvp9_connection`) takes ``_Connection``'s place with
+  ``wire="kvp9"``: each 2048-byte read parsed on its own, as KUKAVARPROXY 9.0 does;
 * :class:`~kukavarproxy_emu.handler.Responder` — pure request → :class:`~pyopenshowvar.protocol.Reply` logic with KVP 9.0
   semantics (reference §2.4, §4.1), no I/O.
 
@@ -49,6 +51,9 @@ from .latency import ServiceQueue
 from .store import VariableStore
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from .kvp9_connection import Kvp9Connection
     from .motion import Robot
 
 __all__ = ["ConnectionInfo", "Emulator", "Stats"]
@@ -325,7 +330,7 @@ class Emulator:
         #: The bound UDP discovery port, or None when discovery is off.
         self.udp_port: int | None = None
         self._server: asyncio.Server | None = None
-        self._connections: dict[int, _Connection] = {}
+        self._connections: dict[int, _Connection | Kvp9Connection] = {}
         self._last_index = 0
         self._idle_task: asyncio.Task[None] | None = None
         self._discovery: asyncio.DatagramTransport | None = None
@@ -348,8 +353,13 @@ class Emulator:
         loop = asyncio.get_running_loop()
         if self.latency is not None:
             self.service = ServiceQueue(self.latency, random.Random(self.config.seed))
+        factory: Callable[[Emulator], asyncio.BaseProtocol] = _Connection
+        if self.config.wire == "kvp9":
+            from .kvp9_connection import Kvp9Connection  # late: it imports this module
+
+            factory = Kvp9Connection
         self._server = await loop.create_server(
-            lambda: _Connection(self), self.config.host, self.config.port, reuse_address=True
+            lambda: factory(self), self.config.host, self.config.port, reuse_address=True
         )
         self.host, self.port = self._server.sockets[0].getsockname()[:2]
         if self.config.idle_timeout > 0:
@@ -441,7 +451,7 @@ class Emulator:
 
     # -- bookkeeping used by _Connection -------------------------------------------------
 
-    def _admit(self, conn: _Connection) -> bool:
+    def _admit(self, conn: _Connection | Kvp9Connection) -> bool:
         limit = self.config.max_clients
         if self._server is None or (limit and len(self._connections) >= limit):
             self.stats.rejected += 1
@@ -454,7 +464,7 @@ class Emulator:
         self.stats.clients = len(self._connections)
         return True
 
-    def _forget(self, conn: _Connection) -> None:
+    def _forget(self, conn: _Connection | Kvp9Connection) -> None:
         self._connections.pop(conn.index, None)
         self.stats.clients = len(self._connections)
 

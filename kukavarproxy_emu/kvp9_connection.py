@@ -1,0 +1,327 @@
+"""The ``--wire kvp9`` connection: every socket read parsed on its own, as KUKAVARPROXY 9.0 does.
+
+:class:`Kvp9Connection` is the wire-faithful sibling of the robust ``server._Connection``. It
+reads at most 2048 bytes per event (``sockServer(Index).Read(strBuffer, 2048)``), hands them to
+:func:`~kukavarproxy_emu.kvp9.sock_server_read` and keeps nothing for the next read: a request cut
+by a read boundary is lost or mis-parsed exactly like on the controller. Answers come from the
+emulator's shared :class:`~kukavarproxy_emu.handler.Responder` (its ``show_var``/``set_var``).
+
+Bounds, per connection: one read of 2048 bytes holds at most 512 requests (each consumes at least
+its 4 header bytes), so one event does at most 512 store calls and writes at most 512 replies.
+Memory is bounded the way the real server bounds it: KVP's socket ``Write`` on a non-blocking
+socket fails once the send buffer is full and the proxy then drops the client (``DropClient``);
+here, once more than :data:`SEND_LIMIT` reply bytes wait in user space, the client is dropped.
+Replies are written at least every :data:`FLUSH_SIZE` bytes, so at most SEND_LIMIT + FLUSH_SIZE
++ one reply wait in the process per connection (an unknown mode after other requests nests the
+previous reply, so one 2048-byte read can answer ~0.5 MB: real KVP does the same).
+
+Without latency or faults a read is answered synchronously inside ``buffer_updated`` and its
+replies leave in one ``transport.write``. Otherwise a worker task serves the read (CrossComm
+calls wait for the global :class:`~kukavarproxy_emu.latency.ServiceQueue`, replies go through the
+faults) while the socket is not read: like the single-threaded proxy, the next read happens only
+after this one was handled, and takes whatever has arrived meanwhile, up to 2048 bytes.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import socket
+import time
+from collections import deque
+from collections.abc import Coroutine
+from dataclasses import dataclass
+from functools import partial
+from typing import TYPE_CHECKING, Any, TypeVar
+
+from .faults import send_reply
+from .handler import Responder
+from .kvp9 import READ_SIZE, ReadOutcome, sock_server_read
+from .server import ConnectionInfo
+
+if TYPE_CHECKING:
+    from .server import Emulator
+
+__all__ = ["FLUSH_SIZE", "SEND_LIMIT", "Kvp9Connection", "Kvp9ConnectionInfo"]
+
+log = logging.getLogger(__name__)
+
+#: Reply bytes allowed to wait in user space before the client counts as not reading (KVP's
+#: failed ``Write`` → ``DropClient``); the kernel's socket buffers come on top of it.
+SEND_LIMIT = 64 * 1024
+#: The fast path writes its collected replies at the latest when they exceed this many bytes.
+FLUSH_SIZE = 16 * 1024
+_T = TypeVar("_T")
+
+
+@dataclass(frozen=True, slots=True)
+class Kvp9ConnectionInfo(ConnectionInfo):
+    """:class:`ConnectionInfo` plus the per-read counters of the wire-faithful mode."""
+
+    #: Socket reads (events) so far, and their bytes.
+    reads: int = 0
+    bytes_read: int = 0
+    #: The largest single read (never above 2048) and the most requests one read went through.
+    largest_read: int = 0
+    most_messages: int = 0
+
+
+def _run_now(coro: Coroutine[Any, Any, _T]) -> _T:
+    """Run a coroutine that never suspends (the fast path's wire) to completion, synchronously."""
+    try:
+        coro.send(None)
+    except StopIteration as done:
+        return done.value  # type: ignore[no-any-return]
+    coro.close()
+    raise RuntimeError("the kvp9 fast path suspended")
+
+
+def _show(responder: Responder, name: bytes) -> bytes:
+    text = responder.show_var(name.decode("latin-1"))
+    return b"" if text is None else text.encode("latin-1", errors="replace")
+
+
+def _set(responder: Responder, name: bytes, value: bytes) -> bool:
+    return responder.set_var(name.decode("latin-1"), value.decode("latin-1"))
+
+
+class _FastWire:
+    """CrossComm without service time; replies coalesced into few writes (one per read, as a
+    rule; every FLUSH_SIZE bytes when a read answers a lot, so the send limit is checked)."""
+
+    def __init__(self, conn: Kvp9Connection) -> None:
+        self.conn = conn
+        self.responder = conn.emu.responder
+        self.out: list[bytes] = []
+        self.size = 0
+
+    async def show_var(self, name: bytes) -> bytes:
+        return _show(self.responder, name)
+
+    async def set_var(self, name: bytes, value: bytes) -> bool:
+        return _set(self.responder, name, value)
+
+    async def send(self, data: bytes) -> None:
+        self.out.append(data)
+        self.size += len(data)
+        if self.size > FLUSH_SIZE:
+            self.flush()
+
+    def flush(self) -> None:
+        out = self.out
+        if out:
+            self.conn.replies += len(out)
+            self.conn.emu.stats.requests += len(out)
+            self.conn.write(out[0] if len(out) == 1 else b"".join(out))
+            out.clear()
+            self.size = 0
+
+
+class _SlowWire:
+    """CrossComm through the latency queue; each reply written at once, through the faults."""
+
+    def __init__(self, conn: Kvp9Connection) -> None:
+        self.conn = conn
+
+    async def show_var(self, name: bytes) -> bytes:
+        emu = self.conn.emu
+        call = partial(_show, emu.responder, name)
+        return await emu.service.run("read", call) if emu.service else call()
+
+    async def set_var(self, name: bytes, value: bytes) -> bool:
+        emu = self.conn.emu
+        call = partial(_set, emu.responder, name, value)
+        return await emu.service.run("write", call) if emu.service else call()
+
+    async def send(self, data: bytes) -> None:
+        conn = self.conn
+        conn.replies += 1
+        conn.emu.stats.requests += 1
+        faults = conn.emu.faults.match(conn.index, conn.replies) if conn.emu.faults else []
+        if not faults:
+            conn.write(data)
+        elif conn.transport is not None and not conn.dropped:
+            if not await send_reply(conn.transport, data, faults):
+                conn.dropped = True
+
+
+class Kvp9Connection(asyncio.BufferedProtocol):
+    """One client of the wire-faithful mode (``EmulatorConfig(wire="kvp9")``)."""
+
+    def __init__(self, emu: Emulator) -> None:
+        self.emu = emu
+        self.transport: asyncio.Transport | None = None
+        self.index = 0
+        self.peer = "?"
+        self.last_rx = time.monotonic()
+        self.closed = False
+        #: The proxy dropped us (send buffer full, or a fault closed the socket): later replies
+        #: of the same read are computed (writes still apply, as in VB) but not sent.
+        self.dropped = False
+        self.replies = 0
+        self.reads = 0
+        self.bytes_read = 0
+        self.largest_read = 0
+        self.most_messages = 0
+        self.worker: asyncio.Task[None] | None = None
+        self._backlog: deque[bytes] = deque()  # at most one read: reading pauses meanwhile
+        self._close_after_work = False
+        self._reading_paused = False
+        self._rbuf = memoryview(bytearray(READ_SIZE))
+        self._fast = _FastWire(self)
+        self._slow = _SlowWire(self)
+        self._ping = emu.responder.ping
+
+    # -- asyncio callbacks ----------------------------------------------------------------
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+        peer = transport.get_extra_info("peername")
+        self.peer = f"{peer[0]}:{peer[1]}" if peer else "?"
+        if not self.emu._admit(self):
+            self.closed = True  # accepted, then disconnected in the Connect event
+            transport.close()
+            return
+        sock = transport.get_extra_info("socket")
+        if sock is not None:
+            try:
+                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            except OSError:
+                pass
+        log.info("client %d connected from %s (wire kvp9)", self.index, self.peer)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self.closed = True
+        if self.index:
+            self.emu._forget(self)
+            log.info("client %d (%s) disconnected", self.index, self.peer)
+        if self.worker is not None:
+            self.worker.cancel()
+
+    def get_buffer(self, sizehint: int) -> memoryview:
+        return self._rbuf
+
+    def buffer_updated(self, nbytes: int) -> None:
+        if self.closed:
+            return
+        data = bytes(self._rbuf[:nbytes])
+        self.reads += 1
+        self.bytes_read += nbytes
+        self.largest_read = max(self.largest_read, nbytes)
+        robot = self.emu.robot
+        if robot is not None:
+            robot.clock.poll()  # a due IPO tick goes before this read (bounded jitter)
+        if self.worker is None and not self.emu.slow:
+            self._serve_now(data)
+            return
+        self._backlog.append(data)
+        self._set_reading(False)
+        if self.worker is None:
+            self.worker = asyncio.get_running_loop().create_task(self._work())
+
+    def eof_received(self) -> bool:
+        # KVP drops the client in its Disconnect event, after the reads before it were served.
+        if self.worker is not None:
+            self._close_after_work = True
+            return True
+        return False
+
+    # -- serving reads --------------------------------------------------------------------
+
+    def _serve_now(self, data: bytes) -> None:
+        wire = self._fast
+        try:
+            outcome = _run_now(
+                sock_server_read(data, wire, ping=self._ping, legacy_ids=self.emu.legacy_ids)
+            )
+        except Exception:
+            wire.out.clear()
+            log.exception("client %d (%s): internal error, closing", self.index, self.peer)
+            self.abort()
+            return
+        self._account(outcome)
+        wire.flush()
+
+    async def _work(self) -> None:
+        try:
+            while self._backlog and not self.closed:
+                data = self._backlog.popleft()
+                outcome = await sock_server_read(
+                    data, self._slow, ping=self._ping, legacy_ids=self.emu.legacy_ids
+                )
+                self._account(outcome)
+            if self._close_after_work and self.transport is not None:
+                self.transport.close()
+        except asyncio.CancelledError:
+            raise
+        except Exception:
+            log.exception("client %d (%s): internal error, closing", self.index, self.peer)
+            self.abort()
+        finally:
+            self.worker = None
+            self._set_reading(True)
+
+    def _account(self, outcome: ReadOutcome) -> None:
+        self.most_messages = max(self.most_messages, outcome.messages)
+        if outcome.completed:
+            # lLastReceiveDate(Index) = Now() is the last statement before Exit Sub: a read
+            # that ends in errRead does not count as activity for the idle timer.
+            self.last_rx = time.monotonic()
+        else:
+            self.emu.stats.protocol_errors += 1
+            log.info("client %d (%s): read ended in errRead", self.index, self.peer)
+
+    def write(self, data: bytes) -> None:
+        """``sockServer(Index).Write``; a client that stops reading is dropped, as KVP does."""
+        transport = self.transport
+        if transport is None or self.dropped or transport.is_closing():
+            return
+        transport.write(data)
+        if transport.get_write_buffer_size() > SEND_LIMIT:
+            log.warning("client %d (%s) does not read its replies; dropped", self.index, self.peer)
+            self.dropped = True
+            self.abort()
+
+    def _set_reading(self, on: bool) -> None:
+        transport = self.transport
+        if transport is None or transport.is_closing() or self._reading_paused is not on:
+            return
+        self._reading_paused = not on
+        if on:
+            transport.resume_reading()
+        else:
+            transport.pause_reading()
+
+    # -- used by the Emulator -------------------------------------------------------------
+
+    def close(self) -> None:
+        self.closed = True
+        if self.transport is None:
+            return
+        if self.worker is None:
+            self.transport.close()
+        else:
+            self._backlog.clear()
+            self._close_after_work = True
+
+    def abort(self) -> None:
+        self.closed = True
+        if self.transport is not None:
+            self.transport.abort()
+
+    def info(self) -> Kvp9ConnectionInfo:
+        transport = self.transport
+        return Kvp9ConnectionInfo(
+            index=self.index,
+            peer=self.peer,
+            received=self.replies,
+            buffered=0,  # nothing survives a read
+            pending=len(self._backlog),
+            write_buffer=transport.get_write_buffer_size() if transport else 0,
+            reading_paused=self._reading_paused,
+            reads=self.reads,
+            bytes_read=self.bytes_read,
+            largest_read=self.largest_read,
+            most_messages=self.most_messages,
+        )
