@@ -4,9 +4,13 @@ Design choices, each forced by how the real proxy behaves (protocol reference §
 
 * **Each request is one ``transport.write``** with TCP_NODELAY, because KVP does not reassemble
   a request cut across two TCP reads.
-* **Pipelining is bounded** by a request count and by the bytes of unanswered requests
-  (default 2048, the size of KVP's single ``Read``), so a burst can never be cut at the proxy's
-  buffer boundary.
+* **Pipelining is bounded** by a request count and by the bytes of unanswered requests: at most
+  ``pipeline_bytes`` (2048, the size of KVP's single ``Read``) and at most one TCP segment of the
+  path (its MSS, read from the socket at connect time). KVP parses every socket read on its own,
+  and a read ends wherever the segments received so far end; while everything unanswered fits
+  in one segment, no segment (and so no read) can end inside a request. A request larger than
+  ``pipeline_bytes`` could never arrive in one read and is refused with :class:`ProtocolError`
+  before anything is sent (raise ``pipeline_bytes`` for servers that reassemble).
 * **Reply matching.** Servers answer in order. A reply is matched by id when the id is pending;
   requests sent *before* that one and still unanswered were silently dropped by the proxy (its
   "reading pending" path) and fail at once instead of waiting for their timeout. A reply whose id
@@ -43,6 +47,14 @@ log = logging.getLogger(__name__)
 IdPolicy = Literal["auto", "strict", "fifo"]
 #: Builds a complete request frame for a given message id.
 _Builder = Callable[[int], bytes]
+
+
+def _segment_size(sock: socket.socket) -> int:
+    """The connection's TCP MSS; 1460 (Ethernet, a KRC's KLI) where the OS does not tell."""
+    try:
+        return max(1, sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_MAXSEG))
+    except (OSError, AttributeError):
+        return 1460
 
 
 class _Pending:
@@ -101,6 +113,8 @@ class Connection:
         self._queue: deque[_Pending] = deque()
         self._by_id: dict[int, _Pending] = {}
         self._bytes_in_flight = 0
+        #: The unanswered-bytes bound in force: pipeline_bytes, lowered to the path's MSS.
+        self._window = self.pipeline_bytes
         self._next_id = 0
         self._slot = asyncio.Event()
         self._closed_exc: Exception | None = None
@@ -152,6 +166,7 @@ class Connection:
         sock = transport.get_extra_info("socket")
         if sock is not None:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            self._window = min(self.pipeline_bytes, _segment_size(sock))
         # No isinstance check on the transport: uvloop's transports are not asyncio.Transport
         # subclasses, and only the interface matters.
         self._transport = transport
@@ -198,9 +213,15 @@ class Connection:
         if not self._queue:
             return True  # a lone request always goes, whatever its size
         return (
-            len(self._queue) < self.max_in_flight
-            and self._bytes_in_flight + size <= self.pipeline_bytes
+            len(self._queue) < self.max_in_flight and self._bytes_in_flight + size <= self._window
         )
+
+    def _check_size(self, name: str, frame: bytes) -> None:
+        if len(frame) > self.pipeline_bytes:
+            raise ProtocolError(
+                f"request for {name!r} is {len(frame)} bytes; KUKAVARPROXY reads at most "
+                f"{self.pipeline_bytes} per socket event and would cut it (see pipeline_bytes)"
+            )
 
     async def _wait_for_room(self, size: int, deadline: float) -> None:
         while True:
@@ -240,7 +261,9 @@ class Connection:
             # control-loop case): same registration, timer, flush and outcome, less overhead.
             timeout = self.timeout if timeout is None else timeout
             loop = asyncio.get_running_loop()
-            pending, frame = self._register(name, build(0), loop)
+            frame0 = build(0)
+            self._check_size(name, frame0)
+            pending, frame = self._register(name, frame0, loop)
             pendings = [pending]
             timer = loop.call_at(loop.time() + timeout, self._expire, pendings, timeout)
             try:
@@ -269,6 +292,9 @@ class Connection:
         fails the requests still unanswered at the deadline.
         """
         timeout = self.timeout if timeout is None else timeout
+        frames0 = [(name, build(0)) for name, build in items]
+        for name, frame0 in frames0:  # refuse before anything is sent
+            self._check_size(name, frame0)
         loop = asyncio.get_running_loop()
         deadline = loop.time() + timeout
         pendings: list[_Pending] = []
@@ -276,8 +302,7 @@ class Connection:
         batch: list[bytes] = []
         timer = loop.call_at(deadline, self._expire, pendings, timeout)
         try:
-            for name, build in items:
-                frame0 = build(0)
+            for name, frame0 in frames0:
                 if not self._fits(len(frame0)):
                     self._flush(batch)
                     try:
