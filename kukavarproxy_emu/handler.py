@@ -51,6 +51,8 @@ def extract_variable_value(name: str, shown: str) -> str:
     ``name`` when the name is an expression; the store answers those as unknown, but the rule is
     kept whole so that the two can never disagree.
     """
+    if "=" not in name:  # the usual case: the first "=" is the one ShowVar put there
+        return shown.strip(" ")
     full = f"{name}={shown}"
     return full[full.index("=") + 1 :].strip(" ")
 

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 
 from kukavarproxy_emu import Emulator, EmulatorConfig, Fault
 from kukavarproxy_emu.__main__ import build_parser, config_from_args
-from kukavarproxy_emu.handler import Responder
+from kukavarproxy_emu.handler import Responder, extract_variable_value
 from kukavarproxy_emu.kvp9 import READ_SIZE, ReadOutcome, sock_server_read
 from kukavarproxy_emu.kvp9_connection import FLUSH_SIZE, SEND_LIMIT, Kvp9ConnectionInfo
 from kukavarproxy_emu.store import VariableStore
@@ -111,6 +111,12 @@ def test_well_formed_reads_answered_like_the_robust_mode(frames: list[bytes]) ->
     wire = StoreWire()
     assert run(sock_server_read(b"".join(frames), wire)).completed
     assert b"".join(wire.out) == robust
+
+
+def test_extract_variable_value_is_vb_trim_after_the_first_equals() -> None:
+    assert extract_variable_value("$TORQUE_AXIS_ACT[]", "0.0 1.5 ") == "0.0 1.5"
+    assert extract_variable_value("X", "\t 1 \n") == "\t 1 \n"  # Trim removes spaces only
+    assert extract_variable_value("$TIMER[1]==1", "TRUE") == "=1=TRUE"  # an expression name
 
 
 def test_legacy_ids_repeat_the_first_id_of_a_read() -> None:
