@@ -1,6 +1,7 @@
 """KUKAVARPROXY 9.0's request parsing, statement by statement: the ``--wire kvp9`` logic, no I/O.
 
-The real server (ImtsSrl/KUKAVARPROXY, VB6) does not frame a byte stream. Each socket event
+The real server (ImtsSrl/KUKAVARPROXY, VB6; ``src/frmMain.frm`` as of commit 2745373,
+``src/basMain.bas`` as of d01d909) does not frame a byte stream. Each socket event
 ``frmMain.sockServer_Read`` reads at most 2048 bytes and walks them on their own; nothing
 survives to the next event. This module is a port of that walk and of ``basMain.readMsg`` /
 ``splitMsg`` on byte strings, keeping the VB6 semantics that decide what malformed input gets:

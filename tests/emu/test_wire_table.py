@@ -7,8 +7,9 @@ before the probe's answer. A row ends ``open`` (the probe was answered), ``close
 ``silent`` (neither within 0.3 s: the server waits for bytes that never come).
 
 The ``kvp9`` column is derived by hand from KUKAVARPROXY 9.0's source (ImtsSrl/KUKAVARPROXY,
-``src/frmMain.frm`` ``sockServer_Read``, ``src/basMain.bas`` ``readMsg``/``splitMsg``/
-``ExtractVariableValue``); the comment above each class of rows names the statements it follows.
+``src/frmMain.frm`` ``sockServer_Read`` as of commit 2745373, ``src/basMain.bas`` ``readMsg``/
+``splitMsg``/``ExtractVariableValue`` as of d01d909, ``cCrossComm.ShowVar`` returning
+``name & "=" & value``); the comment above each class of rows quotes the statements it follows.
 The real server never closes on malformed input, so every kvp9 row ends ``open``. The ``robust``
 column is the default mode's documented behaviour (docs/emulator.md): ``SAME`` where it agrees.
 
