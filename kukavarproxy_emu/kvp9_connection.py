@@ -305,6 +305,19 @@ class Kvp9Connection(asyncio.BufferedProtocol):
             self._backlog.clear()
             self._close_after_work = True
 
+    def drop(self) -> None:
+        """Close now, discarding what is queued or unsent (idle timer, shutdown; the name the
+        reworked robust connection uses for this)."""
+        self.closed = True
+        self._backlog.clear()
+        transport = self.transport
+        if transport is None:
+            return
+        if transport.get_write_buffer_size() or self.worker is not None:
+            transport.abort()
+        else:
+            transport.close()
+
     def abort(self) -> None:
         self.closed = True
         if self.transport is not None:

@@ -235,6 +235,16 @@ async def test_idle_timer_ignores_reads_that_end_in_errread(
     assert emu.stats.idle_drops == 1
 
 
+async def test_drop_closes_at_once(emulator_factory: EmulatorFactory) -> None:
+    emu = await kvp9(emulator_factory, latency="fixed:0.5")
+    async with await RawClient.connect(emu.host, emu.port) as c:
+        await c.send(encode_read(1, "$OV_PRO"))  # held by the worker for 0.5 s
+        await asyncio.sleep(0.05)
+        conn = emu._connections[max(emu._connections)]
+        conn.drop()  # type: ignore[union-attr]
+        assert await c.is_closed_by_peer(timeout=0.3)
+
+
 async def test_eof_after_requests_still_answers(emulator_factory: EmulatorFactory) -> None:
     emu = await kvp9(emulator_factory, latency="fixed:0.01")
     async with await RawClient.connect(emu.host, emu.port) as c:
