@@ -26,6 +26,7 @@ from .config import (
 )
 from .faults import Fault
 from .latency import PROFILES
+from .plant import PLANTS, Obstacle
 from .server import Emulator
 
 __all__ = ["build_parser", "config_from_args", "main"]
@@ -120,7 +121,41 @@ def build_parser() -> argparse.ArgumentParser:
         "--ipo", type=float, default=0.012, help="interpolation cycle, seconds (default 0.012)"
     )
     rob.add_argument(
-        "--noise", type=float, default=0.0, help="noise on $AXIS_ACT_MEAS, deg (default 0)"
+        "--plant",
+        choices=PLANTS,
+        default="dynamic",
+        help="dynamic: rigid-body arm, servos, friction, sensor noise (default); ideal: measured"
+        " = set-point, exact statics torques",
+    )
+    rob.add_argument(
+        "--noise",
+        type=float,
+        default=None,
+        metavar="DEG",
+        help="encoder noise on the measured axes, deg (default: dynamic 2e-5, ideal 0)",
+    )
+    rob.add_argument(
+        "--torque-noise",
+        type=float,
+        default=None,
+        metavar="NM",
+        help="noise on $TORQUE_AXIS_ACT, Nm (default 0.1 %% of each axis' max torque)",
+    )
+    rob.add_argument(
+        "--calibration-error",
+        type=int,
+        default=None,
+        metavar="SEED",
+        help="the physical robot's geometry and masses differ from the nominal model"
+        " (random, realistic amounts drawn with SEED; default off)",
+    )
+    rob.add_argument(
+        "--obstacle",
+        action="append",
+        default=[],
+        metavar="CX,CY,CZ,HX,HY,HZ[,K[,B[,R]]]",
+        help="a box the TCP can push against: centre and half size (mm, $ROBROOT), stiffness"
+        " N/mm (default 2), damping N*s/mm (0.02), probe radius mm (0); repeatable",
     )
     rob.add_argument(
         "--no-robot", dest="robot", action="store_false", help="static variables, no motion"
@@ -157,6 +192,10 @@ def config_from_args(args: argparse.Namespace) -> EmulatorConfig:
         speed=args.speed,
         ipo=args.ipo,
         noise=args.noise,
+        plant=args.plant,
+        torque_noise=args.torque_noise,
+        calibration_error=args.calibration_error,
+        obstacles=tuple(Obstacle.parse(spec) for spec in args.obstacle),
     )
 
 

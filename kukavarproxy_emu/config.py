@@ -14,6 +14,7 @@ from pyopenshowvar.protocol import MAX_FRAME
 
 from .faults import Fault
 from .latency import LatencyProfile, resolve_profile
+from .plant import PLANTS, Obstacle
 
 __all__ = ["DEFAULT_PORT", "KNOWN_QUIRKS", "ROBOT_PROGRAMS", "WIRES", "EmulatorConfig"]
 
@@ -82,8 +83,20 @@ class EmulatorConfig:
     speed: float = 1.0
     #: Interpolation cycle, simulated seconds (KRC4: 12 ms).
     ipo: float = 0.012
-    #: Standard deviation (deg) of the noise on $AXIS_ACT_MEAS / $POS_ACT_MES; 0 = none.
-    noise: float = 0.0
+    #: The physical robot: "dynamic" (MuJoCo rigid bodies, servos, friction, sensor noise) or
+    #: "ideal" (measured = set-point, statics torques: exact values); see kukavarproxy_emu.plant.
+    plant: str = "dynamic"
+    #: Encoder noise (deg, standard deviation) on the measured axes; None = the plant's default
+    #: (ideal 0; dynamic 2e-5, the model file's). Seeded by ``seed``.
+    noise: float | None = None
+    #: Noise on $TORQUE_AXIS_ACT (Nm, standard deviation, every axis); None = the dynamic
+    #: plant's default (0.1 % of each axis' max torque). Dynamic plant only.
+    torque_noise: float | None = None
+    #: Seed of a random calibration error (the physical robot's geometry and masses differ
+    #: from the nominal model); None = none. Dynamic plant only.
+    calibration_error: int | None = None
+    #: Objects in the cell the TCP can push against (dynamic plant only).
+    obstacles: tuple[Obstacle, ...] = ()
 
     def __post_init__(self) -> None:
         if not 0 <= self.port <= 0xFFFF or not 0 <= self.udp_port <= 0xFFFF:
@@ -103,8 +116,17 @@ class EmulatorConfig:
             )
         if self.sps not in ("sps", "none") and not self.sps.lower().endswith(_KRL_SUFFIXES):
             raise ValueError(f"--sps needs 'sps', 'none' or a .sub/.src file, not {self.sps!r}")
-        if not (self.speed > 0 and self.ipo > 0 and self.noise >= 0):
-            raise ValueError("speed and ipo must be > 0 and noise >= 0")
+        if not (self.speed > 0 and self.ipo > 0):
+            raise ValueError("speed and ipo must be > 0")
+        if any(n is not None and not n >= 0 for n in (self.noise, self.torque_noise)):
+            raise ValueError("noise levels must be >= 0")
+        if self.plant not in PLANTS:
+            raise ValueError(f"unknown plant {self.plant!r} (known: {', '.join(PLANTS)})")
+        object.__setattr__(self, "obstacles", tuple(self.obstacles))
+        if self.plant == "ideal" and (
+            self.calibration_error is not None or self.obstacles or self.torque_noise
+        ):
+            raise ValueError("calibration error, obstacles and torque noise need plant 'dynamic'")
         unknown = set(self.quirks) - KNOWN_QUIRKS
         if unknown:
             raise ValueError(f"unknown quirks {sorted(unknown)} (known: {sorted(KNOWN_QUIRKS)})")

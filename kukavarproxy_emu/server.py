@@ -387,6 +387,10 @@ class Emulator:
             speed=cfg.speed,
             noise=cfg.noise,
             seed=cfg.seed,
+            plant=cfg.plant,
+            calibration_error=cfg.calibration_error,
+            torque_noise=cfg.torque_noise,
+            obstacles=cfg.obstacles,
         )
         self.robot.start()
 

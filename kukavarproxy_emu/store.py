@@ -21,7 +21,7 @@ to the declared variables and the read-text cache.
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from functools import partial
 from importlib.metadata import PackageNotFoundError, version
 from typing import Protocol
@@ -110,6 +110,9 @@ class VariableStore:
         # read() text per base name and path; dropped whenever the variable changes
         self._text: dict[str, dict[VarPath, str]] = {}
         self._system: set[str] = set()
+        # lazy values (see defer): the stale base names and the callback that fills them
+        self._stale: frozenset[str] = frozenset()
+        self._fill: Callable[[], None] | None = None
         if system:
             for sv in system_variables(overrides):
                 self.declare(sv.name, sv.type_name, sv.dims, sv.init, sv.read_only, sv.value_range)
@@ -229,6 +232,8 @@ class VariableStore:
         path = parse_name(name)
         if path is None:
             raise UnknownVariable(name)
+        if self._fill is not None and path.base in self._stale:
+            self._refresh()
         cache = self._text.get(path.base)
         if cache is not None:
             text = cache.get(path)
@@ -261,6 +266,8 @@ class VariableStore:
         path = parse_name(name)
         if path is None:
             raise UnknownVariable(name)
+        if self._fill is not None and path.base in self._stale:
+            self._refresh()
         var = self._vars.get(path.base)
         if var is not None and var.is_array and path.index is None and not path.members:
             path = VarPath(path.base, (), ())
@@ -300,6 +307,22 @@ class VariableStore:
 
         self._assign(name, produce, bypass_read_only=True)
 
+    def defer(self, names: Iterable[str], fill: Callable[[], None]) -> None:
+        """Mark the variables ``names`` stale: the first :meth:`read` or :meth:`get` of any of
+        them calls ``fill()`` once, which sets them (e.g. with :meth:`set_system`).
+
+        The simulated robot computes its published readings this way only when someone
+        looks: a robot nobody reads costs no formatting. A later ``defer`` replaces an
+        earlier one that was never filled.
+        """
+        self._stale = frozenset(n.strip().upper() for n in names)
+        self._fill = fill
+
+    def _refresh(self) -> None:
+        fill, self._fill = self._fill, None
+        if fill is not None:
+            fill()
+
     def names(self) -> list[str]:
         """All variable names, sorted (arrays without brackets), for tab completion."""
         return sorted({*self._vars, *self._info})
@@ -322,6 +345,7 @@ class VariableStore:
 
     def snapshot(self) -> dict[str, KrlValue | list[KrlValue | None] | None]:
         """Every variable's value(s) (arrays as new lists, None = uninitialised)."""
+        self._refresh()
         return {k: (list(v.elems) if v.is_array else v.elems[0]) for k, v in self._vars.items()}
 
     # --- internals ---------------------------------------------------------------------------

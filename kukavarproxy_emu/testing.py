@@ -7,7 +7,10 @@ latency and no discovery, and close the emulator after the test:
 * ``emulator`` — an async fixture yielding a started :class:`Emulator`;
 * ``emulator_factory`` — ``await emulator_factory(strict=True, ...)``: any EmulatorConfig field
   as a keyword (``store=`` for a prepared store), as many emulators as the test wants;
-* ``emulator_thread`` — an :class:`EmulatorThread` for synchronous code (CLI tests).
+* ``emulator_thread`` — an :class:`EmulatorThread` for synchronous code (CLI tests);
+* ``ideal_emulator`` / ``ideal_emulator_thread`` — the same with ``plant="ideal"``: measured
+  axes = set-point and statics torques, for tests that compare exact values (the default
+  dynamic plant adds servo lag and seeded sensor noise, like a real robot).
 
 :class:`RawClient` is a deliberately dumb asyncio client speaking raw frames (no ids, no
 retries), for tests that need to see exactly the bytes the emulator sends.
@@ -32,6 +35,7 @@ from .store import VariableStore
 from .threaded import EmulatorThread
 
 __all__ = [
+    "IDEAL_CONFIG",
     "TEST_CONFIG",
     "EmulatorFactory",
     "RawClient",
@@ -39,10 +43,14 @@ __all__ = [
     "emulator_factory",
     "emulator_thread",
     "fast_robot",
+    "ideal_emulator",
+    "ideal_emulator_thread",
 ]
 
 #: The configuration every fixture starts from.
 TEST_CONFIG = EmulatorConfig(port=0, latency="none", discovery=False)
+#: The same with the ideal plant (exact values).
+IDEAL_CONFIG = replace(TEST_CONFIG, plant="ideal")
 
 
 class RawClient:
@@ -142,7 +150,20 @@ async def fast_robot(emulator_factory: EmulatorFactory) -> Emulator:
     return await emulator_factory(speed=20.0)
 
 
+@pytest_asyncio.fixture
+async def ideal_emulator(emulator_factory: EmulatorFactory) -> Emulator:
+    """An emulator with the ideal plant (exact values)."""
+    return await emulator_factory(plant="ideal")
+
+
 @pytest.fixture
 def emulator_thread() -> Iterator[EmulatorThread]:
     with EmulatorThread(TEST_CONFIG) as emu:
+        yield emu
+
+
+@pytest.fixture
+def ideal_emulator_thread() -> Iterator[EmulatorThread]:
+    """An :class:`EmulatorThread` with the ideal plant (exact values)."""
+    with EmulatorThread(IDEAL_CONFIG) as emu:
         yield emu

@@ -17,16 +17,16 @@ def run(*args: str) -> Any:
     return runner.invoke(app, list(args))
 
 
-def test_read_prints_raw_values(emulator_thread: Any) -> None:
-    res = run("--port", str(emulator_thread.port), "read", "$OV_PRO", "$AXIS_ACT")
+def test_read_prints_raw_values(ideal_emulator_thread: Any) -> None:
+    res = run("--port", str(ideal_emulator_thread.port), "read", "$OV_PRO", "$AXIS_ACT")
     assert res.exit_code == 0, res.output
     lines = res.stdout.splitlines()
     assert lines[0] == "100"
     assert lines[1].startswith("{E6AXIS: A1 0.0, A2 -90.0000")
 
 
-def test_read_json_is_typed(emulator_thread: Any) -> None:
-    res = run("--port", str(emulator_thread.port), "read", "--json", "$POS_ACT", "$OV_PRO")
+def test_read_json_is_typed(ideal_emulator_thread: Any) -> None:
+    res = run("--port", str(ideal_emulator_thread.port), "read", "--json", "$POS_ACT", "$OV_PRO")
     assert res.exit_code == 0, res.output
     data = json.loads(res.stdout)
     assert data["$OV_PRO"] == 100
@@ -84,7 +84,7 @@ def test_usage_error_exit_code() -> None:
 
 
 def test_embedded_emulator() -> None:
-    res = run("--emulate", "read", "$TORQUE_AXIS_ACT[]")
+    res = run("--emulate", "--plant", "ideal", "read", "$TORQUE_AXIS_ACT[]")
     assert res.exit_code == 0, res.output
     assert res.stdout.startswith("0.0 -24.7800 -25.5000")
     # the embedded emulator stops with the command, even when the CLI runs in-process

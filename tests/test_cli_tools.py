@@ -73,11 +73,11 @@ def test_watch_connection_refused_and_bad_rate() -> None:
 # ----------------------------------------------------------------------------- record
 
 
-def test_record_writes_a_timestamped_csv(emulator_thread: Any, tmp_path: Path) -> None:
+def test_record_writes_a_timestamped_csv(ideal_emulator_thread: Any, tmp_path: Path) -> None:
     out = tmp_path / "log.csv"
-    emulator_thread.store.set_system("MYINT", 42)
+    ideal_emulator_thread.store.set_system("MYINT", 42)
     res = run(
-        "--port", str(emulator_thread.port),
+        "--port", str(ideal_emulator_thread.port),
         "record", "$OV_PRO", "MYINT", "$AXIS_ACT", "--hz", "20", "--duration", "0.5", "--out", str(out), "--split",
     )  # fmt: skip
     assert res.exit_code == 0, res.output

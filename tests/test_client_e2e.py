@@ -27,6 +27,12 @@ HOME_AXIS = (
 
 
 @pytest.fixture
+def emulator(ideal_emulator: Any) -> Any:
+    """These tests compare exact KRC4 texts: the ideal plant (measured = set-point)."""
+    return ideal_emulator
+
+
+@pytest.fixture
 async def kvp(emulator: Any) -> Any:
     async with Client("127.0.0.1", emulator.port, timeout=2.0) as client:
         yield client

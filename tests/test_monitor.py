@@ -39,7 +39,9 @@ def joints_text(app: MonitorApp) -> str:
     return str(app.query_one("#joints").plain)  # type: ignore[attr-defined]
 
 
-async def test_values_appear_and_update(emulator: Any, tmp_path: Path) -> None:
+async def test_values_appear_and_update(ideal_emulator: Any, tmp_path: Path) -> None:
+    # the ideal plant: this test sets $AXIS_ACT itself, which a dynamic plant overwrites
+    emulator = ideal_emulator
     app = make_app(emulator.port, tmp_path)
     async with app.run_test(size=(80, 24)) as pilot:
         await until(pilot, lambda: app.state.updates > 0 and "-190…45" in joints_text(app))

@@ -96,7 +96,7 @@ def test_read_write_error_history_and_quit(emulator_thread: Any, tmp_path: Path)
 def test_watch_until_ctrl_c_and_tab_completion(tmp_path: Path) -> None:
     child = pexpect.spawn(
         KVP,
-        ["--emulate", "repl"],
+        ["--emulate", "--plant", "ideal", "repl"],
         env={
             **os.environ,
             "KVP_HISTORY": str(tmp_path / "h"),

@@ -43,6 +43,7 @@ from pyopenshowvar_apps.common import (
     EXIT_USAGE,
     EXIT_VARIABLE,
     Opts,
+    plant_choice,
     run,
     start_embedded_emulator,
     to_jsonable,
@@ -86,8 +87,18 @@ def _global(
     emulate: Annotated[
         bool, typer.Option("--emulate", help="Start an embedded emulator and talk to it instead.")
     ] = False,
+    plant: Annotated[
+        str,
+        typer.Option(
+            "--plant",
+            help="The embedded emulator's robot: dynamic (rigid-body arm, servos, noise) or"
+            " ideal (measured = set-point, exact values).",
+            callback=plant_choice,
+        ),
+    ] = "dynamic",
 ) -> None:
     Opts.host, Opts.port, Opts.timeout = host, port, timeout
+    Opts.plant = plant
     Opts.emulator = None
     if emulate:
         start_embedded_emulator(ctx)

@@ -56,10 +56,19 @@ class Opts:
     port = 7000
     timeout = 2.0
     emulator: Any = None
+    #: The embedded emulator's plant (``--plant``): "dynamic" or "ideal".
+    plant = "dynamic"
 
     @classmethod
     def where(cls) -> str:
         return f"{cls.host}:{cls.port}"
+
+
+def plant_choice(value: str) -> str:
+    """Validate a ``--plant`` option (typer callback)."""
+    if value not in ("dynamic", "ideal"):
+        raise typer.BadParameter(f"{value!r} is not one of 'dynamic', 'ideal'")
+    return value
 
 
 def start_embedded_emulator(ctx: typer.Context) -> Any:
@@ -71,7 +80,7 @@ def start_embedded_emulator(ctx: typer.Context) -> Any:
         return Opts.emulator
     from kukavarproxy_emu import EmulatorConfig, EmulatorThread
 
-    thread = EmulatorThread(EmulatorConfig(host="127.0.0.1", port=0))
+    thread = EmulatorThread(EmulatorConfig(host="127.0.0.1", port=0, plant=Opts.plant))
     thread.start()
 
     def stop() -> None:

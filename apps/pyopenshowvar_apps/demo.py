@@ -24,8 +24,13 @@ import typer
 from rich.console import Console
 
 from pyopenshowvar_apps.casestudies.common import CaseResult, output_dir, summary_table
+from pyopenshowvar_apps.common import plant_choice
 
 __all__ = ["demo", "run_demo"]
+
+
+#: The plant the case studies run under (``kvp demo --plant``); the emulator's default.
+PLANT = {"kind": "dynamic"}
 
 
 def _with_emulator(
@@ -36,7 +41,13 @@ def _with_emulator(
     from pyopenshowvar import Client
 
     config = EmulatorConfig(
-        host="127.0.0.1", port=0, program=program, speed=speed, latency="kvp", discovery=False
+        host="127.0.0.1",
+        port=0,
+        program=program,
+        speed=speed,
+        latency="kvp",
+        discovery=False,
+        plant=PLANT["kind"],
     )
     with EmulatorThread(config, store=store) as emu:
 
@@ -119,9 +130,12 @@ def run_demo(
     quick: bool = False,
     only: list[str] | None = None,
     console: Console | None = None,
+    plant: str = "dynamic",
 ) -> list[CaseResult]:
     """Run the case studies (``only``: sub-folder names) and print the summary table."""
     console = console or Console()
+    PLANT["kind"] = plant
+    console.print(f"emulated robot: {plant} plant, kvp latency profile")
     results: list[CaseResult] = []
     for key, title, runner in CASE_STUDIES:
         if only and key not in only:
@@ -151,8 +165,16 @@ def demo(
         list[str] | None,
         typer.Option("--only", help="Run only these: linefollow, teleop, haptic."),
     ] = None,
+    plant: Annotated[
+        str,
+        typer.Option(
+            "--plant",
+            help="dynamic (rigid-body arm, servos, noise) or ideal (measured = set-point).",
+            callback=plant_choice,
+        ),
+    ] = "dynamic",
 ) -> None:
     """Run every case study against an embedded emulator and print ours vs the thesis."""
     if quick and speed == 1.0:
         speed = 4.0
-    run_demo(out, speed=speed, quick=quick, only=only)
+    run_demo(out, speed=speed, quick=quick, only=only, plant=plant)

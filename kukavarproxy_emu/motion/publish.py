@@ -5,9 +5,16 @@ Split from the kernel so the planning code and the "what does a client read" cod
 writes ``$AXIS_ACT``, ``$AXIS_ACT_MEAS``, ``$POS_ACT``, ``$POS_ACT_MES``, ``$VEL_AXIS_ACT``,
 ``$TORQUE_AXIS_ACT`` and ``$VEL_ACT`` in one synchronous step, and skips the write when nothing
 observable changed (at rest the store's read cache stays valid and HOME keeps its exact text).
+
+That is the **ideal** plant: the published axes are the set-point and the torque is the
+kinematics package's statics. With a plant attached (``plant``, the robot's ``--plant
+dynamic``) every cycle hands the set-point to it instead, and the plant publishes what its
+sensors measure (:mod:`kukavarproxy_emu.plant`).
 """
 
 from __future__ import annotations
+
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -24,6 +31,9 @@ from pyopenshowvar.krl import E6Axis, E6Pos, Struct
 
 from ..store import VariableStore
 from .segments import FloatArray
+
+if TYPE_CHECKING:
+    from ..plant import Plant
 
 __all__ = ["Publisher"]
 
@@ -46,6 +56,8 @@ class Publisher:
     _tcp: FloatArray
     _has_wrench: bool
     _published: tuple[object, ...] | None
+    #: The physical robot the set-points drive; None: the ideal plant (set-point = measured).
+    plant: Plant | None = None
 
     def _read_frames(self) -> tuple[FloatArray, FloatArray]:
         raise NotImplementedError  # provided by the kernel
@@ -74,6 +86,9 @@ class Publisher:
     def publish(self, *, force: bool = False) -> None:
         """Write the motion variables, skipping the write when nothing observable changed
         (at rest the store's read cache stays valid and HOME keeps its original text)."""
+        if self.plant is not None:
+            self.plant.step(self.q)
+            return
         key = self._key()
         if not force and key == self._published and not self.noise:
             return

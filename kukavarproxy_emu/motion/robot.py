@@ -26,6 +26,7 @@ import numpy.typing as npt
 from pyopenshowvar.kinematics import KR6R900SIXX, RobotModel
 from pyopenshowvar.krl import KrlEnum, Struct
 
+from ..plant import Obstacle, make_plant
 from ..store import VariableStore
 from .clock import IpoClock, JitterStats
 from .kernel import MotionKernel, MotionRefused
@@ -55,12 +56,31 @@ class Robot:
         ipo: float = 0.012,
         speed: float = 1.0,
         model: RobotModel = KR6R900SIXX,
-        noise: float = 0.0,
+        noise: float | None = None,
         seed: int | None = None,
+        plant: str = "ideal",
+        calibration_error: int | None = None,
+        torque_noise: float | None = None,
+        obstacles: Sequence[Obstacle] = (),
     ) -> None:
         self.store = store
-        self.kernel = MotionKernel(store, model, ipo=ipo, noise=noise, seed=seed)
+        ideal_noise = (noise or 0.0) if plant == "ideal" else 0.0
+        self.kernel = MotionKernel(store, model, ipo=ipo, noise=ideal_noise, seed=seed)
         self.kernel.on_fault = self.fault
+        #: The physical robot (``plant="dynamic"``), None for the ideal plant: see
+        #: :mod:`kukavarproxy_emu.plant`; ``robot.plant.truth`` is the ground truth.
+        self.plant = make_plant(
+            plant,
+            store,
+            model,
+            ipo=ipo,
+            calibration_seed=calibration_error,
+            encoder_noise=noise,
+            torque_noise=torque_noise,
+            seed=seed,
+            obstacles=obstacles,
+        )
+        self.kernel.plant = self.plant
         if isinstance(program, Program):
             self.program = program
         else:

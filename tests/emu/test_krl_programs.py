@@ -140,7 +140,7 @@ END
         "DEFDAT PICK\nDECL BOOL GO=FALSE\nDECL INT NPTS=3\nDECL REAL STEP_DEG=5.0\n"
         "DECL INT CYCLES=0\nENDDAT\n"
     )
-    emu = await emulator_factory(speed=SPEED, program=str(tmp_path / "pick.src"))
+    emu = await emulator_factory(plant="ideal", speed=SPEED, program=str(tmp_path / "pick.src"))
     async with Client("127.0.0.1", emu.port, timeout=2.0) as kvp:
         assert await kvp.read("$PRO_NAME1[]") == '"PICK"'
         await kvp.write("GO", "TRUE")
@@ -159,7 +159,7 @@ async def test_runtime_error_is_readable_and_server_keeps_serving(
         "DEF OOPS()\n  DECL E6AXIS T\n  PTP {A1 30}\n  T = $AXIS_ACT\n  MYINT = MYINT + 1\n"
         "  T.A1 = MYINT * 200\n  PTP T\nEND\n"
     )
-    emu = await emulator_factory(speed=SPEED, program=str(tmp_path / "oops.src"))
+    emu = await emulator_factory(plant="ideal", speed=SPEED, program=str(tmp_path / "oops.src"))
     async with Client("127.0.0.1", emu.port, timeout=2.0) as kvp:
         await wait_for(lambda: _eq(kvp, "$PRO_STATE1", "#P_STOP"))
         message = await kvp.read("$EMU_MESSAGE[]")

@@ -26,7 +26,7 @@ async def wait_for(cond: Any, timeout: float = 5.0) -> None:
 
 
 async def test_myaxis_arrives_in_the_predicted_time(emulator_factory: Any) -> None:
-    emu = await emulator_factory(speed=SPEED)
+    emu = await emulator_factory(plant="ideal", speed=SPEED)
     emu.robot.kernel.trace = []
     target = np.array([40.0, -70.0, 100.0, 20.0, 30.0, 40.0])
     async with Client("127.0.0.1", emu.port, timeout=2.0) as kvp:
@@ -71,7 +71,7 @@ async def test_ov_pro_50_halves_the_speed(emulator_factory: Any) -> None:
 
 
 async def test_out_of_limit_target_is_refused_and_reported(emulator_factory: Any) -> None:
-    emu = await emulator_factory(speed=SPEED)
+    emu = await emulator_factory(plant="ideal", speed=SPEED)
     async with Client("127.0.0.1", emu.port, timeout=2.0) as kvp:
         await kvp.write("MYAXIS", "{A2 50.0}")  # $SOFTP_END[2] = 45
 
@@ -93,7 +93,7 @@ async def test_out_of_limit_target_is_refused_and_reported(emulator_factory: Any
 
 
 async def test_wrench_written_over_kvp_shows_as_jt_f(emulator_factory: Any) -> None:
-    emu = await emulator_factory(speed=SPEED)
+    emu = await emulator_factory(plant="ideal", speed=SPEED)
     async with Client("127.0.0.1", emu.port, timeout=2.0) as kvp:
         home = [float(v) for v in (await kvp.read("$TORQUE_AXIS_ACT[]")).split()][:6]
         np.testing.assert_allclose(home, [0, -24.8, -25.5, -0.8, -0.6, 0], atol=1.0)
@@ -110,7 +110,7 @@ async def test_wrench_written_over_kvp_shows_as_jt_f(emulator_factory: Any) -> N
 
 
 async def test_joint_path_handshake_end_to_end(emulator_factory: Any) -> None:
-    emu = await emulator_factory(speed=SPEED, program="joint_path")
+    emu = await emulator_factory(plant="ideal", speed=SPEED, program="joint_path")
     points = [[5.0 * i, -90.0 + 3 * i, 90.0 - 2 * i, 0.0, 10.0 + i, -i] for i in range(1, 6)]
     async with Client("127.0.0.1", emu.port, timeout=2.0) as kvp:
         assert await kvp.read("$PRO_NAME1[]") == '"JOINT_PATH"'
@@ -125,7 +125,7 @@ async def test_joint_path_handshake_end_to_end(emulator_factory: Any) -> None:
 
 
 async def test_cart_path_with_lin_end_to_end(emulator_factory: Any) -> None:
-    emu = await emulator_factory(speed=SPEED, program="cart_path")
+    emu = await emulator_factory(plant="ideal", speed=SPEED, program="cart_path")
     emu.robot.kernel.ptp([0.0, -80.0, 80.0, 0.0, 30.0, 0.0])  # leave HOME's wrist singularity
     await asyncio.sleep(1.0 / SPEED)
     start = forward(KR6R900SIXX, emu.robot.q)

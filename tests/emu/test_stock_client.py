@@ -36,10 +36,10 @@ MAX_STOCK_VALUE = RECV_SIZE - 7 - 3
 
 
 @pytest.fixture
-def client(emulator_thread: EmulatorThread) -> Iterator[openshowvar]:
-    c = openshowvar(emulator_thread.host, emulator_thread.port)
+def client(ideal_emulator_thread: EmulatorThread) -> Iterator[openshowvar]:
+    c = openshowvar(ideal_emulator_thread.host, ideal_emulator_thread.port)
     # The constructor swallows connect errors; fail here rather than on the first read.
-    assert c.sock.getpeername()[1] == emulator_thread.port
+    assert c.sock.getpeername()[1] == ideal_emulator_thread.port
     c.sock.settimeout(2.0)
     yield c
     c.close()
@@ -101,10 +101,10 @@ def test_unknown_variable_is_empty_bytes_not_none(client: openshowvar) -> None:
 # --- writes --------------------------------------------------------------------------------
 
 
-def test_write_ov_pro_and_read_back(client: openshowvar, emulator_thread: EmulatorThread) -> None:
+def test_write_ov_pro_and_read_back(client: openshowvar, ideal_emulator_thread: EmulatorThread) -> None:
     assert client.write("$OV_PRO", "50", debug=False) == b"50"  # KVP echoes the written text
     assert client.read("$OV_PRO", debug=False) == b"50"
-    assert emulator_thread.store.get("$OV_PRO") == 50
+    assert ideal_emulator_thread.store.get("$OV_PRO") == 50
 
 
 def test_write_struct_to_myaxis_and_read_back(client: openshowvar) -> None:
@@ -124,7 +124,7 @@ def test_write_struct_to_myaxis_and_read_back(client: openshowvar) -> None:
 
 
 def test_refused_write_returns_none_and_keeps_the_id(
-    client: openshowvar, emulator_thread: EmulatorThread
+    client: openshowvar, ideal_emulator_thread: EmulatorThread
 ) -> None:
     # KVP echoes the value with tail 00 01 00; the stock client's "failure" is None, and it
     # does not advance msg_id, so the next request reuses the id — which must still work.
@@ -137,7 +137,7 @@ def test_refused_write_returns_none_and_keeps_the_id(
     assert client.write("$OV_PRO", "101", debug=False) is None  # range 0..100
     assert client.write("$OV_PRO", "fast", debug=False) is None
     assert client.write("@PROXY_TYPE", '"x"', debug=False) is None
-    assert emulator_thread.store.get("$OV_PRO") == 100
+    assert ideal_emulator_thread.store.get("$OV_PRO") == 100
 
 
 # --- message ids ---------------------------------------------------------------------------
@@ -177,17 +177,17 @@ def test_id_wraps_from_65535_to_0(client: openshowvar) -> None:
     ],
 )
 def test_long_values_break_the_stock_clients_single_recv(
-    client: openshowvar, emulator_thread: EmulatorThread, value_len: int, expected: str | None
+    client: openshowvar, ideal_emulator_thread: EmulatorThread, value_len: int, expected: str | None
 ) -> None:
     # py_openshowvar's bug, not the emulator's (reference/peers.md): one recv(256) per reply,
     # value = bytes 7..-3 of whatever arrived, success = last byte 01. The emulator sends a
     # whole, correct frame (checked with a raw socket). Deterministic on loopback: the reply
     # goes out in one write, so the first recv gets min(frame, 256) bytes.
     text = "".join(chr(ord("A") + i % 26) for i in range(value_len - 2))  # quoted: +2 bytes
-    declare_text(emulator_thread, "LONGTEXT", 400, text)
+    declare_text(ideal_emulator_thread, "LONGTEXT", 400, text)
     value = f'"{text}"'.encode()
 
-    frame = raw_read(emulator_thread, "LONGTEXT[]")
+    frame = raw_read(ideal_emulator_thread, "LONGTEXT[]")
     reply = decode_reply(frame)
     assert reply.ok and reply.value == value and len(frame) == len(value) + 10
 
@@ -201,22 +201,22 @@ def test_long_values_break_the_stock_clients_single_recv(
 
 
 def test_long_write_succeeds_but_the_stock_client_reports_none(
-    client: openshowvar, emulator_thread: EmulatorThread
+    client: openshowvar, ideal_emulator_thread: EmulatorThread
 ) -> None:
     # KVP echoes the written value, so a successful write of a long text comes back longer
     # than 256 bytes and py_openshowvar reports it like a failure. The rest of that reply stays
     # in its socket and would be misread by the next call, so this client is not used again.
-    declare_text(emulator_thread, "LONGTEXT", 400, "")
+    declare_text(ideal_emulator_thread, "LONGTEXT", 400, "")
     text = "K" * 300
     assert client.write("LONGTEXT[]", f'"{text}"', debug=False) is None
-    assert emulator_thread.call(emulator_thread.store.read, "LONGTEXT[]") == f'"{text}"'
+    assert ideal_emulator_thread.call(ideal_emulator_thread.store.read, "LONGTEXT[]") == f'"{text}"'
 
 
 def test_non_ascii_text_is_sent_as_utf8(
-    client: openshowvar, emulator_thread: EmulatorThread
+    client: openshowvar, ideal_emulator_thread: EmulatorThread
 ) -> None:
     # py_openshowvar encodes UTF-8 while KVP (like the emulator) reads single-byte text: a
     # non-ASCII character arrives as two characters, and reads back as those two bytes.
     assert client.write("MYSTRING[]", '"é"', debug=False) == '"é"'.encode()
-    assert emulator_thread.call(emulator_thread.store.read, "MYSTRING[]") == '"Ã©"'
+    assert ideal_emulator_thread.call(ideal_emulator_thread.store.read, "MYSTRING[]") == '"Ã©"'
     assert client.read("MYSTRING[]", debug=False) == b'"\xc3\xa9"'

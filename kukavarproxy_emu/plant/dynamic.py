@@ -1,0 +1,432 @@
+"""The dynamic plant: MuJoCo rigid-body arm + joint servos + friction + sensors.
+
+Every IPO cycle :meth:`DynamicPlant.step` receives the kernel's set-point. The drives
+fine-interpolate it linearly over the cycle and a cascaded servo per axis (position P →
+velocity PI, velocity and acceleration feed-forward; gains from the model file) computes the
+motor torque each physics step. MuJoCo integrates the arm under that torque, gravity, the
+regularised Coulomb + viscous joint friction, the payload ($LOAD, a welded body), the external
+wrench ``EMU_WRENCH`` and contact with :class:`~.contact.Obstacle` objects. What the controller
+publishes is what its sensors see: encoder positions (+ seeded noise), the motor torques
+(+ seeded noise), velocities.
+
+**At rest** (set-point constant, servo converged) the physics is not stepped: the state is
+snapped onto the set-point and the motor torque is the exact static torque (gravity + load +
+external) from MuJoCo; only the noise changes per cycle. **Publication is lazy**: each cycle
+marks the motion variables stale in the store and the first read of any of them fills all of
+them from this cycle's state (noise drawn from ``(seed, cycle)``, so values do not depend on
+when they are read). A robot nobody reads costs almost nothing at rest.
+
+Ground truth for experiments (never published through a variable): :attr:`DynamicPlant.truth`.
+"""
+
+from __future__ import annotations
+
+import logging
+import secrets
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from pyopenshowvar.kinematics import RobotModel, forward, status_turn
+from pyopenshowvar.krl import E6Axis, E6Pos, Struct
+
+from ..store import VariableStore
+from .contact import Obstacle, contact_force
+from .mjcf import Payload, build_mjcf, frame_matrix, payload_of
+from .params import Bodies, FloatArray, PlantParams, bodies_of, load_params, with_calibration_error
+
+__all__ = ["MOTION_VARIABLES", "DynamicPlant", "StepRecord", "Truth"]
+
+log = logging.getLogger(__name__)
+
+#: The variables a plant publishes (base names).
+MOTION_VARIABLES = (
+    "$AXIS_ACT", "$AXIS_ACT_MEAS", "$POS_ACT", "$POS_ACT_MES", "$VEL_AXIS_ACT",
+    "$TORQUE_AXIS_ACT", "$VEL_ACT",
+)  # fmt: skip
+#: Converged: position error (rad) and speed (rad/s) below these at a constant set-point.
+SETTLE_POS = 1e-6
+SETTLE_VEL = 1e-5
+_WRENCH = ("FX", "FY", "FZ", "MX", "MY", "MZ")
+_E6 = np.zeros(6)
+
+
+@dataclass(frozen=True, eq=False)
+class Truth:
+    """The physical state at the end of an IPO cycle (ground truth, not a sensor reading).
+
+    ``q`` axis angles (deg) as a noise-free encoder reads them (with ``calibration_error`` the
+    joints' true zero differs by the mastering error, which is part of the physical geometry), ``flange`` / ``tcp`` 4×4 poses in
+    ``$ROBROOT`` (mm) of the *physical* robot (with ``calibration_error`` not the nominal FK),
+    ``contact`` the wrench the TCP exerts on the obstacles (N, Nm; EMU_WRENCH convention),
+    ``wrench`` the EMU_WRENCH applied, ``torque`` the motor torques without sensor noise (Nm).
+    """
+
+    time: float
+    q: FloatArray
+    flange: FloatArray
+    tcp: FloatArray
+    contact: FloatArray
+    wrench: FloatArray
+    torque: FloatArray
+
+
+@dataclass(frozen=True, eq=False)
+class StepRecord:
+    """The last physics step of a cycle (SI units, rad): state before it, the acceleration
+    MuJoCo integrated, the motor torque and the other generalised forces applied (friction,
+    external wrench, contact). M(q)·qacc + bias(q, qd) = motor + other holds exactly."""
+
+    q: FloatArray
+    qd: FloatArray
+    qacc: FloatArray
+    motor: FloatArray
+    other: FloatArray
+
+
+class DynamicPlant:
+    """The physical KR 6 R900 sixx behind one emulated controller."""
+
+    kind = "dynamic"
+
+    def __init__(
+        self,
+        store: VariableStore,
+        model: RobotModel,
+        *,
+        ipo: float = 0.012,
+        params: PlantParams | None = None,
+        calibration_seed: int | None = None,
+        encoder_noise: float | None = None,
+        torque_noise: float | None = None,
+        seed: int | None = None,
+        obstacles: Sequence[Obstacle] = (),
+    ) -> None:
+        self.store = store
+        self.model = model
+        self.ipo = ipo
+        self.params = params if params is not None else load_params()
+        p = self.params
+        bodies = bodies_of(model, p)
+        if calibration_seed is not None:
+            bodies = with_calibration_error(bodies, p.calibration, calibration_seed)
+        #: The physical robot simulated (differs from ``model`` with a calibration error).
+        self.bodies: Bodies = bodies
+        self.calibration_seed = calibration_seed
+        #: Encoder noise (deg) and torque noise (Nm per axis), standard deviations.
+        self.encoder_noise = p.encoder_noise_deg if encoder_noise is None else encoder_noise
+        frac = p.torque_noise_fraction
+        self.torque_noise = (
+            model.max_torque * frac if torque_noise is None else np.full(6, float(torque_noise))
+        )
+        if self.encoder_noise < 0 or np.any(self.torque_noise < 0):
+            raise ValueError("noise levels must be >= 0")
+        self.seed = seed if seed is not None else secrets.randbits(63)
+        self.obstacles: tuple[Obstacle, ...] = tuple(obstacles)
+        self.substeps = p.substeps
+        self.h = ipo / p.substeps
+        self.time = 0.0
+        self.ticks = 0
+        self.steps = 0  # physics steps taken (the rest path takes none)
+        self.torque_limit = np.where(np.isfinite(model.max_torque), model.max_torque, 1e9)
+        self._payload: Payload | None = None
+        self._tool = np.eye(4)
+        self._wrench = np.zeros(6)
+        self._has_wrench = "EMU_WRENCH" in store.names()
+        self._inputs: tuple[object, ...] = (None, None, None)
+        self._st_key, self._st = b"", (0, 0)
+        q0 = np.radians(self._axes(store.get("$AXIS_ACT")))
+        self._build(payload_of(store.get("$LOAD")))
+        # servo gains from the inertia each axis sees at the start pose (motor + links)
+        inertia = self._mass_diagonal(q0)
+        self._kd = inertia * p.velocity_bandwidth
+        self._ki = self._kd * p.integral_corner
+        self._kff = inertia if p.acceleration_feedforward else np.zeros(6)
+        self._q_set = q0.copy()
+        self._qd_ref = np.zeros(6)
+        self._integral = np.zeros(6)
+        self.torque = np.zeros(6)  # motor torque (Nm, +KUKA axis) at the end of the cycle
+        self.contact = np.zeros(3)  # force of the obstacles on the TCP (N)
+        self._tcp_prev = np.zeros(3)
+        self._tcp_speed = 0.0
+        self.resting = False
+        self.last_step: StepRecord | None = None
+        self._obstacles_used = self.obstacles
+        self._inputs_changed()  # the start-up $TOOL and EMU_WRENCH
+        self._settle()
+        self._defer()  # the model's readings (not the store's start-up table) from the first read
+
+    # --- model --------------------------------------------------------------------------------
+    def _build(self, payload: Payload | None) -> None:
+        """(Re)compile the MuJoCo model for ``payload``, keeping the joint state."""
+        old = getattr(self, "_data", None)
+        xml = build_mjcf(self.bodies, self.params, timestep=self.h, payload=payload)
+        self._mj = mujoco.MjModel.from_xml_string(xml)
+        self._data = mujoco.MjData(self._mj)
+        if old is not None:
+            self._data.qpos[:] = old.qpos
+            self._data.qvel[:] = old.qvel
+        self._payload = payload
+        self._tcp_site = mujoco.mj_name2id(self._mj, mujoco.mjtObj.mjOBJ_SITE, "tcp")
+        self._flange_site = mujoco.mj_name2id(self._mj, mujoco.mjtObj.mjOBJ_SITE, "flange")
+        self._link6 = mujoco.mj_name2id(self._mj, mujoco.mjtObj.mjOBJ_BODY, "link6")
+        self._flange_local = self._site_local(self._flange_site)
+        self._set_tool(self._tool)
+        mujoco.mj_forward(self._mj, self._data)
+
+    def _site_local(self, site: int) -> FloatArray:
+        t = np.eye(4)
+        mat = np.zeros(9)
+        mujoco.mju_quat2Mat(mat, self._mj.site_quat[site])
+        t[:3, :3] = mat.reshape(3, 3)
+        t[:3, 3] = self._mj.site_pos[site] * 1000.0
+        return t
+
+    def _set_tool(self, tool: FloatArray) -> None:
+        self._tool = tool
+        tcp = self._flange_local @ tool
+        quat = np.zeros(4)
+        mujoco.mju_mat2Quat(quat, tcp[:3, :3].flatten())
+        self._mj.site_pos[self._tcp_site] = tcp[:3, 3] / 1000.0
+        self._mj.site_quat[self._tcp_site] = quat
+
+    def _mass_diagonal(self, q: FloatArray) -> FloatArray:
+        """Diagonal of the joint-space inertia M(q) (motor + links), by inverse dynamics:
+        with q̇ = 0, the torque for q̈ = e_j minus the torque for q̈ = 0 is M's column j."""
+        m = self._mj
+        data = mujoco.MjData(m)
+        data.qpos[:] = q
+        mujoco.mj_inverse(m, data)
+        bias = data.qfrc_inverse.copy()
+        diag = np.zeros(6)
+        for j in range(6):
+            data.qacc[:] = 0.0
+            data.qacc[j] = 1.0
+            mujoco.mj_inverse(m, data)
+            diag[j] = data.qfrc_inverse[j] - bias[j]
+        return diag
+
+    def set_obstacles(self, obstacles: Sequence[Obstacle]) -> None:
+        """Replace the objects in the cell (takes effect on the next cycle; thread-safe by
+        replacing one tuple)."""
+        self.obstacles = tuple(obstacles)
+
+    # --- inputs from the store -----------------------------------------------------------------
+    @staticmethod
+    def _axes(value: object) -> FloatArray:
+        assert isinstance(value, Struct)
+        return np.array([float(value[f"A{i}"]) for i in range(1, 7)])  # type: ignore[arg-type]
+
+    def _read_wrench(self) -> FloatArray:
+        if not self._has_wrench:
+            return np.zeros(6)
+        w = self.store.get("EMU_WRENCH")
+        if not isinstance(w, Struct):
+            return np.zeros(6)
+        return np.array([float(w.get(k) or 0.0) for k in _WRENCH])  # type: ignore[arg-type]
+
+    def _read_frame(self, name: str) -> FloatArray:
+        f = self.store.get(name)
+        if not isinstance(f, Struct):
+            return np.zeros(6)
+        return np.array([float(f.get(k) or 0.0) for k in "XYZABC"])  # type: ignore[arg-type]
+
+    def _inputs_changed(self) -> bool:
+        """Read $LOAD, $TOOL, EMU_WRENCH; apply changes; True when any changed.
+
+        The store hands out the same value object until the variable is written, so an
+        unchanged input costs one lookup and an identity test (the rest path runs this every
+        cycle)."""
+        store = self.store
+        load, tool = store.get("$LOAD"), store.get("$TOOL")
+        wrench = store.get("EMU_WRENCH") if self._has_wrench else None
+        seen = (load, tool, wrench)
+        if all(a is b for a, b in zip(seen, self._inputs, strict=True)):
+            return self.obstacles is not self._obstacles_used
+        self._inputs = seen
+        changed = self.obstacles is not self._obstacles_used
+        payload = payload_of(load)
+        if payload != self._payload:
+            self._build(payload)
+            changed = True
+        tool_m = frame_matrix(self._read_frame("$TOOL"))
+        if not np.array_equal(tool_m, self._tool):
+            self._set_tool(tool_m)
+            changed = True
+        w = self._read_wrench()
+        if not np.array_equal(w, self._wrench):
+            self._wrench = w
+            changed = True
+        return changed
+
+    # --- the cycle ----------------------------------------------------------------------------
+    def step(self, q_set_deg: FloatArray) -> None:
+        """One IPO cycle towards the set-point ``q_set_deg`` (A1..A6, deg)."""
+        q_set = np.radians(q_set_deg)
+        changed = self._inputs_changed()
+        still = np.array_equal(q_set, self._q_set)
+        if self.resting and still and not changed:
+            self.time += self.ipo
+            self.ticks += 1
+            if self.encoder_noise or np.any(self.torque_noise):
+                self._defer()
+            return
+        self.resting = False
+        qd_ref = (q_set - self._q_set) / self.ipo
+        qdd_ref = (qd_ref - self._qd_ref) / self.ipo
+        self._simulate(self._q_set, q_set, qd_ref, qdd_ref)
+        self._q_set, self._qd_ref = q_set, qd_ref
+        self.time += self.ipo
+        self.ticks += 1
+        d = self._data
+        if (
+            still
+            and not np.any(qd_ref)
+            and np.max(np.abs(q_set - d.qpos)) < SETTLE_POS
+            and np.max(np.abs(d.qvel)) < SETTLE_VEL
+        ):
+            self._settle()
+        self.truth = self._truth()
+        self._defer()
+
+    def _simulate(
+        self, q0: FloatArray, q1: FloatArray, qd_ref: FloatArray, qdd_ref: FloatArray
+    ) -> None:
+        m, d, n = self._mj, self._data, self.substeps
+        p = self.params
+        self._obstacles_used = obstacles = self.obstacles
+        dq = q1 - q0
+        ff = self._kff * qdd_ref
+        coulomb, viscous, vs = self.bodies.coulomb, self.bodies.viscous, p.friction_smoothing
+        kd, ki, h = self._kd, self._ki * self.h, self.h
+        lim = self.torque_limit
+        wrench = self._wrench
+        ext_fixed = self._external(-wrench[:3], -wrench[3:]) if np.any(wrench) else None
+        tcp_xpos = d.site_xpos[self._tcp_site]
+        contact = np.zeros(3)
+        q_last, qd_last = d.qpos.copy(), d.qvel.copy()
+        for k in range(1, n + 1):
+            qpos, qvel = d.qpos, d.qvel
+            e = q0 + dq * ((k - 1) / n) - qpos  # the reference at this step's start time
+            ev = qd_ref + p.position_gain * e - qvel
+            self._integral += ki * ev
+            tau = np.clip(kd * ev + self._integral + ff, -lim, lim)
+            applied = tau - coulomb * np.tanh(qvel / vs) - viscous * qvel
+            if ext_fixed is not None:
+                applied += ext_fixed
+            if obstacles:
+                tcp = tcp_xpos * 1000.0
+                vel = (tcp - self._tcp_prev) / h
+                contact = contact_force(obstacles, tcp, vel)
+                if np.any(contact):
+                    applied += self._external(contact, np.zeros(3))
+            d.qfrc_applied[:] = applied
+            self._tcp_prev = tcp_xpos * 1000.0
+            if k == n:  # the last step's inputs, for the equations-of-motion check
+                q_last, qd_last = qpos.copy(), qvel.copy()
+            mujoco.mj_step(m, d)
+            self.torque = tau
+        self.steps += n
+        self.last_step = StepRecord(q_last, qd_last, d.qacc.copy(), tau.copy(), applied - tau)
+        self.contact = contact
+        mujoco.mj_forward(m, d)  # positions and sites of the final state
+        if obstacles:
+            self.contact = contact_force(obstacles, tcp_xpos * 1000.0, np.zeros(3))
+
+    def _external(self, force: FloatArray, torque: FloatArray) -> FloatArray:
+        """Generalised force of a wrench on link 6 at the TCP (N, Nm, world axes)."""
+        out = np.zeros(6)
+        point = self._data.site_xpos[self._tcp_site].copy()
+        mujoco.mj_applyFT(
+            self._mj, self._data, force.astype(np.float64), torque.astype(np.float64),
+            point, self._link6, out,
+        )  # fmt: skip
+        return out
+
+    def _settle(self) -> None:
+        """Snap onto the set-point at rest with the exact static torque (the cheap path)."""
+        m, d = self._mj, self._data
+        d.qpos[:] = self._q_set
+        d.qvel[:] = 0.0
+        d.qacc[:] = 0.0
+        mujoco.mj_forward(m, d)
+        self._obstacles_used = self.obstacles
+        static = d.qfrc_bias.copy()  # gravity (+ load) holding torque at rest
+        if np.any(self._wrench):
+            static -= self._external(-self._wrench[:3], -self._wrench[3:])
+        self.contact = np.zeros(3)
+        if self.obstacles:
+            tcp = d.site_xpos[self._tcp_site] * 1000.0
+            self.contact = contact_force(self.obstacles, tcp, np.zeros(3))
+            if np.any(self.contact):
+                static -= self._external(self.contact, np.zeros(3))
+        self._tcp_prev = d.site_xpos[self._tcp_site] * 1000.0
+        self._integral = static.copy()
+        self._qd_ref = np.zeros(6)
+        self.torque = np.clip(static, -self.torque_limit, self.torque_limit)
+        self.resting = True
+        self.truth = self._truth()
+
+    def _truth(self) -> Truth:
+        d = self._data
+        flange = np.eye(4)
+        flange[:3, :3] = d.site_xmat[self._flange_site].reshape(3, 3)
+        flange[:3, 3] = d.site_xpos[self._flange_site] * 1000.0
+        tcp = flange @ self._tool
+        return Truth(
+            time=self.time,
+            q=np.degrees(d.qpos).copy(),
+            flange=flange,
+            tcp=tcp,
+            contact=np.concatenate([-self.contact, np.zeros(3)]),
+            wrench=self._wrench.copy(),
+            torque=self.torque * self.model.torque_sign,
+        )
+
+    # --- sensors and publication --------------------------------------------------------------
+    def _defer(self) -> None:
+        self.store.defer(MOTION_VARIABLES, self.publish)
+
+    def measure(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """This cycle's sensor readings: axes (deg), axis speeds (deg/s), torques (Nm)."""
+        rng = np.random.default_rng((self.seed, self.ticks))
+        d = self._data
+        q = np.degrees(d.qpos)
+        if self.encoder_noise:
+            q = q + rng.normal(0.0, self.encoder_noise, 6)
+        tau = self.torque * self.model.torque_sign
+        if np.any(self.torque_noise):
+            tau = tau + rng.normal(0.0, 1.0, 6) * self.torque_noise
+        return q, np.degrees(d.qvel), tau
+
+    def _status_turn(self) -> tuple[int, int]:
+        """S and T of the set-point: the configuration the controller commands (a measured
+        axis jittering around 0° by encoder noise does not flip a turn bit)."""
+        key = self._q_set.tobytes()
+        if key != self._st_key:
+            s, t = status_turn(self.model, np.degrees(self._q_set))
+            self._st_key, self._st = key, (int(s), int(t))
+        return self._st
+
+    def publish(self) -> None:
+        """Write this cycle's readings into the store (called by the store on the first read)."""
+        q, qd, tau = self.measure()
+        store, model = self.store, self.model
+        axes = E6Axis.from_numpy(np.concatenate([q, _E6]))
+        store.set_system("$AXIS_ACT", axes)
+        store.set_system("$AXIS_ACT_MEAS", axes)
+        tool, base = self._read_frame("$TOOL"), self._read_frame("$BASE")
+        s, t = self._status_turn()
+        xyzabc = forward(model, q, tool, base)
+        pos = E6Pos.from_numpy(np.concatenate([xyzabc, _E6]), s=int(s), t=int(t))
+        store.set_system("$POS_ACT", pos)
+        store.set_system("$POS_ACT_MES", pos)
+        store.set_system("$VEL_AXIS_ACT", [*(qd / model.max_speed * 100.0), *_E6])
+        store.set_system("$TORQUE_AXIS_ACT", [*tau, *_E6])
+        v = np.zeros(6)
+        mujoco.mj_objectVelocity(
+            self._mj, self._data, mujoco.mjtObj.mjOBJ_SITE, self._tcp_site, v, 0
+        )
+        store.set_system("$VEL_ACT", float(np.linalg.norm(v[3:])))
