@@ -137,7 +137,8 @@ class DynamicPlant:
         self._has_wrench = "EMU_WRENCH" in store.names()
         self._inputs: tuple[object, ...] = (None, None, None)
         self._st_key, self._st = b"", (0, 0)
-        q0 = np.radians(self._axes(store.get("$AXIS_ACT")))
+        q0_deg = self._axes(store.get("$AXIS_ACT"))
+        q0 = np.radians(q0_deg)
         self._build(payload_of(store.get("$LOAD")))
         # servo gains from the inertia each axis sees at the start pose (motor + links)
         inertia = self._mass_diagonal(q0)
@@ -145,6 +146,7 @@ class DynamicPlant:
         self._ki = self._kd * p.integral_corner
         self._kff = inertia if p.acceleration_feedforward else np.zeros(6)
         self._q_set = q0.copy()
+        self._q_set_deg = q0_deg  # at rest the encoders read exactly this (no noise)
         self._qd_ref = np.zeros(6)
         self._integral = np.zeros(6)
         self.torque = np.zeros(6)  # motor torque (Nm, +KUKA axis) at the end of the cycle
@@ -207,6 +209,16 @@ class DynamicPlant:
             mujoco.mj_inverse(m, data)
             diag[j] = data.qfrc_inverse[j] - bias[j]
         return diag
+
+    @property
+    def mujoco(self) -> tuple[object, object]:
+        """The MuJoCo ``(MjModel, MjData)`` simulated (read it; stepping it breaks the plant)."""
+        return self._mj, self._data
+
+    @property
+    def payload(self) -> Payload | None:
+        """The payload body currently simulated (from ``$LOAD``)."""
+        return self._payload
 
     def set_obstacles(self, obstacles: Sequence[Obstacle]) -> None:
         """Replace the objects in the cell (takes effect on the next cycle; thread-safe by
@@ -278,6 +290,7 @@ class DynamicPlant:
         qdd_ref = (qd_ref - self._qd_ref) / self.ipo
         self._simulate(self._q_set, q_set, qd_ref, qdd_ref)
         self._q_set, self._qd_ref = q_set, qd_ref
+        self._q_set_deg = np.array(q_set_deg, dtype=np.float64)
         self.time += self.ipo
         self.ticks += 1
         d = self._data
@@ -377,7 +390,7 @@ class DynamicPlant:
         tcp = flange @ self._tool
         return Truth(
             time=self.time,
-            q=np.degrees(d.qpos).copy(),
+            q=self._q_set_deg.copy() if self.resting else np.degrees(d.qpos),
             flange=flange,
             tcp=tcp,
             contact=np.concatenate([-self.contact, np.zeros(3)]),
@@ -393,7 +406,8 @@ class DynamicPlant:
         """This cycle's sensor readings: axes (deg), axis speeds (deg/s), torques (Nm)."""
         rng = np.random.default_rng((self.seed, self.ticks))
         d = self._data
-        q = np.degrees(d.qpos)
+        # at rest the state was snapped onto the set-point: report it without a rad/deg trip
+        q = self._q_set_deg.copy() if self.resting else np.degrees(d.qpos)
         if self.encoder_noise:
             q = q + rng.normal(0.0, self.encoder_noise, 6)
         tau = self.torque * self.model.torque_sign

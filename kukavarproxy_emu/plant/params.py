@@ -193,8 +193,8 @@ def with_calibration_error(bodies: Bodies, cal: Calibration, seed: int) -> Bodie
     """
     rng = np.random.default_rng(seed)
 
-    def scale(x: FloatArray, frac: float) -> FloatArray:
-        factor = 1.0 + np.clip(rng.normal(0.0, frac, x.shape), -3 * frac, 3 * frac)
+    def scale(x: FloatArray, frac: float, shape: tuple[int, ...] = (6,)) -> FloatArray:
+        factor = 1.0 + np.clip(rng.normal(0.0, frac, shape), -3 * frac, 3 * frac)
         return np.asarray(x * factor, dtype=np.float64)
 
     return replace(
@@ -205,7 +205,8 @@ def with_calibration_error(bodies: Bodies, cal: Calibration, seed: int) -> Bodie
         offset=bodies.offset + rng.normal(0.0, cal.angle_deg, 6),
         mass=scale(bodies.mass, cal.mass_fraction),
         com=bodies.com + rng.normal(0.0, cal.com_mm, (6, 3)),  # moves with its link
-        inertia=scale(bodies.inertia, cal.inertia_fraction),
+        # one factor per link: the three moments keep satisfying the triangle inequality
+        inertia=scale(bodies.inertia, cal.inertia_fraction, (6, 1)),
         coulomb=scale(bodies.coulomb, cal.friction_fraction),
         viscous=scale(bodies.viscous, cal.friction_fraction),
     )
