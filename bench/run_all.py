@@ -30,6 +30,7 @@ SCRIPTS = [
     ("Codec", "codec.py"),
     ("Emulator", "emu_throughput.py"),
     ("Kinematics", "kinematics.py"),
+    ("Simulated robot CPU", "plant_cpu.py"),
 ]
 
 

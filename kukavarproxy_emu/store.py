@@ -273,17 +273,29 @@ class VariableStore:
             path = VarPath(path.base, (), ())
         return self._lookup(path, name, nd_whole=True)
 
-    def set_system(self, name: str, value: object) -> None:
+    def set_system(self, name: str, value: object, *, trusted: bool = False) -> None:
         """Set a value bypassing read-only (robot model, simulated I/O, apps).
 
         ``value`` is a KRL value (numpy scalars are accepted for numbers; a whole array takes a
         list of every element). It is checked against the type exactly like written text; a
         partial struct changes only its members. Raises :class:`UnknownVariable` or :class:`WriteRefused`.
+
+        ``trusted``: the caller built a complete value of the declared type itself (the
+        simulated robot's readings, every cycle): a whole variable is swapped in unchecked.
         """
         path = parse_name(name)
         var = self._vars.get(path.base) if path is not None else None
         if path is None or var is None:
             raise UnknownVariable(name)
+        if trusted and not path.index and not path.members:
+            if var.is_array:
+                if not isinstance(value, list) or len(value) != len(var.elems):
+                    raise WriteRefused(name, f"needs a list of {len(var.elems)} values")
+                var.elems = list(value)
+            else:
+                var.elems[0] = value  # type: ignore[assignment]
+            self._text.pop(var.name, None)
+            return
         reg = self.registry
         if var.is_array and not path.index and not path.members:  # whole array: a list
             if not isinstance(value, list) or len(value) != len(var.elems):

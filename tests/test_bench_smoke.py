@@ -24,6 +24,7 @@ BENCH = Path(__file__).resolve().parents[1] / "bench"
         ("codec.py", "E6POS"),
         ("emu_throughput.py", "requests/s, 10 clients"),
         ("kinematics.py", "Jacobian"),
+        ("plant_cpu.py", "dynamic plant, moving"),
     ],
 )
 def test_benchmark_runs_quick(script: str, expect: str) -> None:

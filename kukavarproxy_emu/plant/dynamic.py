@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from pyopenshowvar.kinematics import RobotModel, forward, status_turn
+from pyopenshowvar.kinematics import RobotModel, fk_matrix, matrix_to_frame, status_turn
 from pyopenshowvar.krl import E6Axis, E6Pos, Struct
 
 from ..store import VariableStore
@@ -49,8 +49,11 @@ MOTION_VARIABLES = (
 #: Converged: position error (rad) and speed (rad/s) below these at a constant set-point.
 SETTLE_POS = 1e-6
 SETTLE_VEL = 1e-5
+#: Cycles of sensor noise drawn at once.
+NOISE_BLOCK = 256
 _WRENCH = ("FX", "FY", "FZ", "MX", "MY", "MZ")
 _E6 = np.zeros(6)
+_ZEROS = [0.0] * 6  # E1..E6 of the per-axis arrays
 
 
 @dataclass(frozen=True, eq=False)
@@ -137,6 +140,10 @@ class DynamicPlant:
         self._has_wrench = "EMU_WRENCH" in store.names()
         self._inputs: tuple[object, ...] = (None, None, None)
         self._st_key, self._st = b"", (0, 0)
+        self._noise_block = -1
+        self._base_seen: object = None
+        self._base: FloatArray | None = None
+        self._noise = np.zeros((NOISE_BLOCK, 12))
         q0_deg = self._axes(store.get("$AXIS_ACT"))
         q0 = np.radians(q0_deg)
         self._build(payload_of(store.get("$LOAD")))
@@ -404,16 +411,35 @@ class DynamicPlant:
 
     def measure(self) -> tuple[FloatArray, FloatArray, FloatArray]:
         """This cycle's sensor readings: axes (deg), axis speeds (deg/s), torques (Nm)."""
-        rng = np.random.default_rng((self.seed, self.ticks))
+        noise = self._noise_sample(self.ticks)
         d = self._data
         # at rest the state was snapped onto the set-point: report it without a rad/deg trip
         q = self._q_set_deg.copy() if self.resting else np.degrees(d.qpos)
         if self.encoder_noise:
-            q = q + rng.normal(0.0, self.encoder_noise, 6)
+            q = q + noise[:6] * self.encoder_noise
         tau = self.torque * self.model.torque_sign
         if np.any(self.torque_noise):
-            tau = tau + rng.normal(0.0, 1.0, 6) * self.torque_noise
+            tau = tau + noise[6:] * self.torque_noise
         return q, np.degrees(d.qvel), tau
+
+    def _noise_sample(self, cycle: int) -> FloatArray:
+        """Standard normal noise of one cycle: a function of ``(seed, cycle)`` only, drawn in
+        blocks of ``NOISE_BLOCK`` cycles (one generator per block, not per reading)."""
+        block, row = divmod(cycle, NOISE_BLOCK)
+        if block != self._noise_block:
+            rng = np.random.default_rng((self.seed, block))
+            self._noise = rng.standard_normal((NOISE_BLOCK, 12))
+            self._noise_block = block
+        return np.asarray(self._noise[row])
+
+    def _base_matrix(self) -> FloatArray | None:
+        """$BASE as a 4×4 transform (None for $NULLFRAME), converted when it changes."""
+        base = self.store.get("$BASE")
+        if base is not self._base_seen:
+            frame = self._read_frame("$BASE")
+            self._base_seen = base
+            self._base = frame_matrix(frame) if np.any(frame) else None
+        return self._base
 
     def _status_turn(self) -> tuple[int, int]:
         """S and T of the set-point: the configuration the controller commands (a measured
@@ -429,18 +455,19 @@ class DynamicPlant:
         q, qd, tau = self.measure()
         store, model = self.store, self.model
         axes = E6Axis.from_numpy(np.concatenate([q, _E6]))
-        store.set_system("$AXIS_ACT", axes)
-        store.set_system("$AXIS_ACT_MEAS", axes)
-        tool, base = self._read_frame("$TOOL"), self._read_frame("$BASE")
+        store.set_system("$AXIS_ACT", axes, trusted=True)
+        store.set_system("$AXIS_ACT_MEAS", axes, trusted=True)
         s, t = self._status_turn()
-        xyzabc = forward(model, q, tool, base)
+        xyzabc = matrix_to_frame(fk_matrix(model, q, self._tool, self._base_matrix()))
         pos = E6Pos.from_numpy(np.concatenate([xyzabc, _E6]), s=int(s), t=int(t))
-        store.set_system("$POS_ACT", pos)
-        store.set_system("$POS_ACT_MES", pos)
-        store.set_system("$VEL_AXIS_ACT", [*(qd / model.max_speed * 100.0), *_E6])
-        store.set_system("$TORQUE_AXIS_ACT", [*tau, *_E6])
+        store.set_system("$POS_ACT", pos, trusted=True)
+        store.set_system("$POS_ACT_MES", pos, trusted=True)
+        store.set_system(
+            "$VEL_AXIS_ACT", [float(v) for v in qd / model.max_speed * 100.0] + _ZEROS, trusted=True
+        )
+        store.set_system("$TORQUE_AXIS_ACT", [float(v) for v in tau] + _ZEROS, trusted=True)
         v = np.zeros(6)
         mujoco.mj_objectVelocity(
             self._mj, self._data, mujoco.mjtObj.mjOBJ_SITE, self._tcp_site, v, 0
         )
-        store.set_system("$VEL_ACT", float(np.linalg.norm(v[3:])))
+        store.set_system("$VEL_ACT", float(np.linalg.norm(v[3:])), trusted=True)

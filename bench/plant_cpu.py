@@ -1,0 +1,105 @@
+"""Plant CPU benchmark: % of one core a simulated robot costs, at rest and moving, per plant.
+
+One robot (``kukavarproxy_emu.motion.Robot``, no program, no SPS) runs on its real-time IPO
+clock (12 ms, ``speed = 1``) in an asyncio loop for ``--seconds`` per scenario; the figure is
+process CPU time / wall time. Scenarios: at rest and moving (back-to-back 100 % PTPs between
+two poses), each without a reader and with one that reads ``$AXIS_ACT`` and
+``$TORQUE_AXIS_ACT[]`` every cycle (in process, so the TCP server's cost is not counted; the
+dynamic plant computes its readings only when they are read). The targets are issue 11's:
+≤ 1 % of a core per robot at rest and ≤ 5 % moving (50 robots in one process).
+
+    .venv/bin/python bench/plant_cpu.py [--quick] [--seconds 4] [--json PATH]
+"""
+
+from __future__ import annotations
+
+import asyncio
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from _common import Row, base_parser, print_rows, write_json
+
+from kukavarproxy_emu.motion import Robot
+from kukavarproxy_emu.store import VariableStore
+
+POSES = (
+    np.array([-60.0, -60.0, 80.0, -90.0, -40.0, -120.0]),
+    np.array([60.0, -100.0, 110.0, 90.0, 40.0, 120.0]),
+)
+TARGETS = {"rest": 1.0, "moving": 5.0}
+
+
+async def cpu_percent(plant: str, moving: bool, reader: bool, seconds: float) -> float:
+    """CPU % of one robot; ``plant = "clock"``: the IPO clock alone (an empty cycle)."""
+    store = VariableStore()
+    robot = Robot(store, program="none", sps=None, plant="ideal" if plant == "clock" else plant, seed=1)
+    kernel, tick = robot.kernel, robot.tick
+    turn = [0]
+
+    def cycle() -> None:
+        if plant == "clock":
+            return
+        if moving and not kernel.moving:
+            kernel.ptp(POSES[turn[0] % 2])
+            turn[0] += 1
+        tick()
+        if reader:
+            store.read("$AXIS_ACT")
+            store.read("$TORQUE_AXIS_ACT[]")
+
+    robot.clock.callback = cycle
+    robot.start()
+    await asyncio.sleep(0.3)  # warm-up: imports, first motion planned
+    cpu0, wall0 = time.process_time(), time.perf_counter()
+    await asyncio.sleep(seconds)
+    cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
+    await robot.stop()
+    return 100.0 * cpu / wall
+
+
+async def main_async(seconds: float) -> list[Row]:
+    base = await cpu_percent("clock", False, False, seconds)
+    rows = [
+        Row(
+            "asyncio loop + 12 ms IPO clock alone (empty cycle)",
+            base,
+            "%",
+            note="included in every figure below",
+        )
+    ]
+    for state in ("rest", "moving"):
+        for plant in ("ideal", "dynamic"):
+            for reader in (False, True):
+                pct = await cpu_percent(plant, state == "moving", reader, seconds)
+                who = "a reader every cycle" if reader else "no reader"
+                rows.append(
+                    Row(
+                        f"{plant} plant, {state}, {who}",
+                        pct,
+                        "%",
+                        target=("ours", "<=", TARGETS[state]),
+                        note="issue 11 target (per robot, 50 in one process)"
+                        if plant == "dynamic" and not reader
+                        else "",
+                    )
+                )
+    return rows
+
+
+def main() -> None:
+    ap = base_parser(__doc__)
+    ap.add_argument("--seconds", type=float, default=4.0, help="wall seconds per scenario")
+    args = ap.parse_args()
+    seconds = 0.4 if args.quick else args.seconds
+    rows = asyncio.run(main_async(seconds))
+    print_rows("CPU of one simulated robot (% of one core, real time, 12 ms IPO)", rows)
+    write_json(args.json, "plant", rows, {})
+
+
+if __name__ == "__main__":
+    main()
