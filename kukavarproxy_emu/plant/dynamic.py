@@ -268,7 +268,11 @@ class DynamicPlant:
         changed = self.obstacles is not self._obstacles_used
         payload = payload_of(load)
         if payload != self._payload:
-            self._build(payload)
+            try:
+                self._build(payload)
+            except ValueError as exc:  # MuJoCo refused the model: keep the previous one
+                log.warning("$LOAD %s cannot be simulated (%s); keeping the previous load", payload, exc)
+                self._payload = payload  # do not retry every cycle
             changed = True
         tool_m = frame_matrix(self._read_frame("$TOOL"))
         if not np.array_equal(tool_m, self._tool):
@@ -301,7 +305,12 @@ class DynamicPlant:
         self.time += self.ipo
         self.ticks += 1
         d = self._data
-        if (
+        if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
+            # absurd inputs (a wrench or load of 1e30) blew the state up: a KRC's drives would
+            # trip; here the arm is put back on its set-point so the emulator keeps serving
+            log.warning("plant state not finite (absurd wrench or load?); reset to the set-point")
+            self._settle()
+        elif (
             still
             and not np.any(qd_ref)
             and np.max(np.abs(q_set - d.qpos)) < SETTLE_POS
@@ -331,7 +340,8 @@ class DynamicPlant:
             qpos, qvel = d.qpos, d.qvel
             e = q0 + dq * ((k - 1) / n) - qpos  # the reference at this step's start time
             ev = qd_ref + p.position_gain * e - qvel
-            self._integral += ki * ev
+            # anti-windup: the integral never asks for more than the motor can give
+            self._integral = np.clip(self._integral + ki * ev, -lim, lim)
             tau = np.clip(kd * ev + self._integral + ff, -lim, lim)
             applied = tau - coulomb * np.tanh(qvel / vs) - viscous * qvel
             if ext_fixed is not None:
@@ -383,9 +393,9 @@ class DynamicPlant:
             if np.any(self.contact):
                 static -= self._external(self.contact, np.zeros(3))
         self._tcp_prev = d.site_xpos[self._tcp_site] * 1000.0
-        self._integral = static.copy()
-        self._qd_ref = np.zeros(6)
         self.torque = np.clip(static, -self.torque_limit, self.torque_limit)
+        self._integral = self.torque.copy()
+        self._qd_ref = np.zeros(6)
         self.resting = True
         self.truth = self._truth()
 

@@ -120,9 +120,11 @@ def build_mjcf(
     armature = params.armature
     lines = [
         '<mujoco model="kr6r900sixx-plant">',
-        '  <compiler angle="radian"/>',
+        # balanceinertia: a $LOAD inertia J that no rigid body can have is made physical
+        '  <compiler angle="radian" balanceinertia="true"/>',
         f'  <option timestep="{timestep!r}" integrator="Euler" gravity="0 0 {-GRAVITY!r}">',
-        '    <flag contact="disable" constraint="disable"/>',
+        # autoreset off: a blown-up state must reach the plant's own guard, not jump to q = 0
+        '    <flag contact="disable" constraint="disable" autoreset="disable"/>',
         "  </option>",
         "  <worldbody>",
     ]

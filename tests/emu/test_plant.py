@@ -342,3 +342,18 @@ def test_deferred_values_are_filled_once_on_first_read() -> None:
     assert store.read("$OV_PRO") == "100" and not calls  # other variables do not fill
     assert store.read("$VEL_ACT") == "1.50000" and store.get("$VEL_ACT") == 1.5
     assert calls == [1]
+
+
+def test_absurd_wrench_and_load_keep_readings_finite_and_recover() -> None:
+    store = VariableStore()
+    robot = quiet_robot(store=store)
+    robot.apply_wrench([1e30, 0.0, 0.0, 0.0, 0.0, 0.0])
+    store.write("$LOAD", "{M 1e9, CM {X 100.0}, J {X 5.0, Y 0.0, Z 0.0}}")  # no such body
+    for _ in range(10):
+        robot.tick()
+        assert np.all(np.isfinite(torques(store))) and np.all(np.isfinite(axes(store)))
+        assert np.all(np.abs(torques(store)) <= KR6R900SIXX.max_torque + 1e-9)  # saturated
+    robot.apply_wrench([0.0] * 6)
+    store.write("$LOAD", "{M 0.0}")
+    run_until_rest(robot)  # anti-windup: the servo recovers instead of spinning the arm
+    np.testing.assert_array_equal(axes(store), HOME)
