@@ -24,7 +24,7 @@ import logging
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from functools import partial
 from importlib.metadata import PackageNotFoundError, version
-from typing import Protocol
+from typing import Protocol, cast
 
 from pyopenshowvar.errors import KrlValueError
 from pyopenshowvar.krl import (
@@ -291,9 +291,9 @@ class VariableStore:
             if var.is_array:
                 if not isinstance(value, list) or len(value) != len(var.elems):
                     raise WriteRefused(name, f"needs a list of {len(var.elems)} values")
-                var.elems = list(value)
+                var.elems = cast(list[KrlValue | None], list(value))
             else:
-                var.elems[0] = value  # type: ignore[assignment]
+                var.elems[0] = cast(KrlValue, value)
             self._text.pop(var.name, None)
             return
         reg = self.registry
