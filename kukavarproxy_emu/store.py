@@ -291,9 +291,9 @@ class VariableStore:
             if var.is_array:
                 if not isinstance(value, list) or len(value) != len(var.elems):
                     raise WriteRefused(name, f"needs a list of {len(var.elems)} values")
-                var.elems = cast(list[KrlValue | None], list(value))
+                var.elems = cast("list[KrlValue | None]", list(value))
             else:
-                var.elems[0] = cast(KrlValue, value)
+                var.elems[0] = cast("KrlValue", value)
             self._text.pop(var.name, None)
             return
         reg = self.registry
