@@ -37,7 +37,8 @@ TARGETS = {"rest": 1.0, "moving": 5.0}
 async def cpu_percent(plant: str, moving: bool, reader: bool, seconds: float) -> float:
     """CPU % of one robot; ``plant = "clock"``: the IPO clock alone (an empty cycle)."""
     store = VariableStore()
-    robot = Robot(store, program="none", sps=None, plant="ideal" if plant == "clock" else plant, seed=1)
+    kind = "ideal" if plant == "clock" else plant
+    robot = Robot(store, program="none", sps=None, plant=kind, seed=1)
     kernel, tick = robot.kernel, robot.tick
     turn = [0]
 
@@ -54,7 +55,7 @@ async def cpu_percent(plant: str, moving: bool, reader: bool, seconds: float) ->
 
     robot.clock.callback = cycle
     robot.start()
-    await asyncio.sleep(0.3)  # warm-up: imports, first motion planned
+    await asyncio.sleep(min(0.3, seconds))  # warm-up: imports, first motion planned
     cpu0, wall0 = time.process_time(), time.perf_counter()
     await asyncio.sleep(seconds)
     cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
@@ -95,7 +96,7 @@ def main() -> None:
     ap = base_parser(__doc__)
     ap.add_argument("--seconds", type=float, default=4.0, help="wall seconds per scenario")
     args = ap.parse_args()
-    seconds = 0.4 if args.quick else args.seconds
+    seconds = 0.2 if args.quick else args.seconds
     rows = asyncio.run(main_async(seconds))
     print_rows("CPU of one simulated robot (% of one core, real time, 12 ms IPO)", rows)
     write_json(args.json, "plant", rows, {})

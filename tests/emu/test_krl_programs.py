@@ -74,7 +74,7 @@ async def test_joint_path_visits_every_point_in_order(emulator_factory: Any) -> 
 
 
 async def test_actuator_keeps_moving_for_queued_increments(emulator_factory: Any) -> None:
-    emu = await emulator_factory(speed=SPEED, program="actuator")
+    emu = await emulator_factory(plant="ideal", speed=SPEED, program="actuator")
     async with Client("127.0.0.1", emu.port, timeout=2.0) as kvp:
         await wait_for(lambda: _eq(kvp, "$ADVANCE", "1"))
         await kvp.write("$OV_PRO", "10")  # slow increments: the test sees them queue up
