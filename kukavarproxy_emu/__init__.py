@@ -18,6 +18,7 @@ if TYPE_CHECKING:
     from .faults import Fault, FaultSet
     from .handler import Responder, build_store
     from .latency import PROFILES, LatencyProfile, ServiceTime
+    from .plant import Obstacle
     from .server import ConnectionInfo, Emulator, Stats
     from .threaded import EmulatorThread
 
@@ -30,6 +31,7 @@ _LAZY = {
     "PROFILES": "latency",
     "LatencyProfile": "latency",
     "ServiceTime": "latency",
+    "Obstacle": "plant",
     "ConnectionInfo": "server",
     "Emulator": "server",
     "EmulatorThread": "threaded",
@@ -55,6 +57,7 @@ __all__ = [
     "Fault",
     "FaultSet",
     "LatencyProfile",
+    "Obstacle",
     "Responder",
     "ServiceTime",
     "Stats",

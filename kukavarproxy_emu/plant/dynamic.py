@@ -147,11 +147,7 @@ class DynamicPlant:
         q0_deg = self._axes(store.get("$AXIS_ACT"))
         q0 = np.radians(q0_deg)
         self._build(payload_of(store.get("$LOAD")))
-        # servo gains from the inertia each axis sees at the start pose (motor + links)
-        inertia = self._mass_diagonal(q0)
-        self._kd = inertia * p.velocity_bandwidth
-        self._ki = self._kd * p.integral_corner
-        self._kff = inertia if p.acceleration_feedforward else np.zeros(6)
+        self._set_gains(q0)
         self._q_set = q0.copy()
         self._q_set_deg = q0_deg  # at rest the encoders read exactly this (no noise)
         self._qd_ref = np.zeros(6)
@@ -200,6 +196,16 @@ class DynamicPlant:
         mujoco.mju_mat2Quat(quat, tcp[:3, :3].flatten())
         self._mj.site_pos[self._tcp_site] = tcp[:3, 3] / 1000.0
         self._mj.site_quat[self._tcp_site] = quat
+
+    def _set_gains(self, q: FloatArray) -> None:
+        """Servo gains from the inertia each axis sees at ``q`` (motor + links + payload), so
+        every axis has the same bandwidth; re-tuned when the payload changes, as a KRC uses
+        $LOAD in its controller (a light arm with a heavy load's gains would go unstable)."""
+        p = self.params
+        inertia = self._mass_diagonal(q)
+        self._kd = inertia * p.velocity_bandwidth
+        self._ki = self._kd * p.integral_corner
+        self._kff = inertia if p.acceleration_feedforward else np.zeros(6)
 
     def _mass_diagonal(self, q: FloatArray) -> FloatArray:
         """Diagonal of the joint-space inertia M(q) (motor + links), by inverse dynamics:
@@ -270,6 +276,7 @@ class DynamicPlant:
         if payload != self._payload:
             try:
                 self._build(payload)
+                self._set_gains(self._q_set)
             except ValueError as exc:  # MuJoCo refused the model: keep the previous one
                 log.warning("$LOAD %s cannot be simulated (%s); keeping the previous load", payload, exc)
                 self._payload = payload  # do not retry every cycle

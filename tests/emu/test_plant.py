@@ -357,3 +357,15 @@ def test_absurd_wrench_and_load_keep_readings_finite_and_recover() -> None:
     store.write("$LOAD", "{M 0.0}")
     run_until_rest(robot)  # anti-windup: the servo recovers instead of spinning the arm
     np.testing.assert_array_equal(axes(store), HOME)
+
+
+def test_removing_a_heavy_load_retunes_the_servo_and_stays_stable() -> None:
+    store = VariableStore()
+    store.write("$LOAD", "{M 6.0, CM {X 0.0, Y 150.0, Z 100.0}, J {X 0.05, Y 0.05, Z 0.05}}")
+    robot = quiet_robot(store=store)  # gains tuned for the loaded arm
+    store.write("$LOAD", "{M 0.0}")  # the light arm with those gains would oscillate
+    target = np.array([30.0, -60.0, 100.0, 90.0, 60.0, 200.0])
+    robot.kernel.ptp(target)
+    run_until_rest(robot, limit=300)
+    np.testing.assert_array_equal(axes(store), target)
+    assert plant_of(robot).payload is None
