@@ -41,6 +41,16 @@ __all__ = ["MOTION_VARIABLES", "DynamicPlant", "StepRecord", "Truth"]
 
 log = logging.getLogger(__name__)
 
+
+def _mujoco_warning(message: str) -> None:
+    log.warning("MuJoCo: %s", message.strip())
+
+
+# MuJoCo's default prints warnings and appends them to MUJOCO_LOG.TXT in the working directory;
+# an emulator must not write files where it happens to run: route them to logging instead.
+if mujoco.get_mju_user_warning() is None:
+    mujoco.set_mju_user_warning(_mujoco_warning)
+
 #: The variables a plant publishes (base names).
 MOTION_VARIABLES = (
     "$AXIS_ACT", "$AXIS_ACT_MEAS", "$POS_ACT", "$POS_ACT_MES", "$VEL_AXIS_ACT",

@@ -344,7 +344,10 @@ def test_deferred_values_are_filled_once_on_first_read() -> None:
     assert calls == [1]
 
 
-def test_absurd_wrench_and_load_keep_readings_finite_and_recover() -> None:
+def test_absurd_wrench_and_load_keep_readings_finite_and_recover(
+    tmp_path: Any, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    monkeypatch.chdir(tmp_path)
     store = VariableStore()
     robot = quiet_robot(store=store)
     robot.apply_wrench([1e30, 0.0, 0.0, 0.0, 0.0, 0.0])
@@ -357,6 +360,8 @@ def test_absurd_wrench_and_load_keep_readings_finite_and_recover() -> None:
     store.write("$LOAD", "{M 0.0}")
     run_until_rest(robot)  # anti-windup: the servo recovers instead of spinning the arm
     np.testing.assert_array_equal(axes(store), HOME)
+    # MuJoCo's complaints went to logging, not to a MUJOCO_LOG.TXT where the emulator runs
+    assert "MuJoCo: Nan" in caplog.text and not list(tmp_path.iterdir())
 
 
 def test_removing_a_heavy_load_retunes_the_servo_and_stays_stable() -> None:
