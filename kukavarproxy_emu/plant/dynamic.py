@@ -17,6 +17,7 @@ them from this cycle's state (noise drawn from ``(seed, cycle)``, so values do n
 when they are read). A robot nobody reads costs almost nothing at rest.
 
 Ground truth for experiments (never published through a variable): :attr:`DynamicPlant.truth`.
+The readings are :mod:`.sensors`.
 """
 
 from __future__ import annotations
@@ -29,13 +30,14 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from pyopenshowvar.kinematics import RobotModel, fk_matrix, matrix_to_frame, status_turn
-from pyopenshowvar.krl import E6Axis, E6Pos, Struct
+from pyopenshowvar.kinematics import RobotModel
+from pyopenshowvar.krl import Struct
 
 from ..store import VariableStore
 from .contact import Obstacle, contact_force
 from .mjcf import Payload, build_mjcf, frame_matrix, payload_of
 from .params import Bodies, FloatArray, PlantParams, bodies_of, load_params, with_calibration_error
+from .sensors import MOTION_VARIABLES, Sensors
 
 __all__ = ["MOTION_VARIABLES", "DynamicPlant", "StepRecord", "Truth"]
 
@@ -51,19 +53,10 @@ def _mujoco_warning(message: str) -> None:
 if mujoco.get_mju_user_warning() is None:
     mujoco.set_mju_user_warning(_mujoco_warning)
 
-#: The variables a plant publishes (base names).
-MOTION_VARIABLES = (
-    "$AXIS_ACT", "$AXIS_ACT_MEAS", "$POS_ACT", "$POS_ACT_MES", "$VEL_AXIS_ACT",
-    "$TORQUE_AXIS_ACT", "$VEL_ACT",
-)  # fmt: skip
 #: Converged: position error (rad) and speed (rad/s) below these at a constant set-point.
 SETTLE_POS = 1e-6
 SETTLE_VEL = 1e-5
-#: Cycles of sensor noise drawn at once.
-NOISE_BLOCK = 256
 _WRENCH = ("FX", "FY", "FZ", "MX", "MY", "MZ")
-_E6 = np.zeros(6)
-_ZEROS = [0.0] * 6  # E1..E6 of the per-axis arrays
 
 
 @dataclass(frozen=True, eq=False)
@@ -99,7 +92,7 @@ class StepRecord:
     other: FloatArray
 
 
-class DynamicPlant:
+class DynamicPlant(Sensors):
     """The physical KR 6 R900 sixx behind one emulated controller."""
 
     kind = "dynamic"
@@ -149,11 +142,7 @@ class DynamicPlant:
         self._wrench = np.zeros(6)
         self._has_wrench = "EMU_WRENCH" in store.names()
         self._inputs: tuple[object, ...] = (None, None, None)
-        self._st_key, self._st = b"", (0, 0)
-        self._noise_block = -1
-        self._base_seen: object = None
-        self._base: FloatArray | None = None
-        self._noise = np.zeros((NOISE_BLOCK, 12))
+        self._init_sensors()
         q0_deg = self._axes(store.get("$AXIS_ACT"))
         q0 = np.radians(q0_deg)
         self._build(payload_of(store.get("$LOAD")))
@@ -431,70 +420,3 @@ class DynamicPlant:
             wrench=self._wrench.copy(),
             torque=self.torque * self.model.torque_sign,
         )
-
-    # --- sensors and publication --------------------------------------------------------------
-    def _defer(self) -> None:
-        self.store.defer(MOTION_VARIABLES, self.publish)
-
-    def measure(self) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """This cycle's sensor readings: axes (deg), axis speeds (deg/s), torques (Nm)."""
-        noise = self._noise_sample(self.ticks)
-        d = self._data
-        # at rest the state was snapped onto the set-point: report it without a rad/deg trip
-        q = self._q_set_deg.copy() if self.resting else np.degrees(d.qpos)
-        if self.encoder_noise:
-            q = q + noise[:6] * self.encoder_noise
-        tau = self.torque * self.model.torque_sign
-        if np.any(self.torque_noise):
-            tau = tau + noise[6:] * self.torque_noise
-        return q, np.degrees(d.qvel), tau
-
-    def _noise_sample(self, cycle: int) -> FloatArray:
-        """Standard normal noise of one cycle: a function of ``(seed, cycle)`` only, drawn in
-        blocks of ``NOISE_BLOCK`` cycles (one generator per block, not per reading)."""
-        block, row = divmod(cycle, NOISE_BLOCK)
-        if block != self._noise_block:
-            rng = np.random.default_rng((self.seed, block))
-            self._noise = rng.standard_normal((NOISE_BLOCK, 12))
-            self._noise_block = block
-        return np.asarray(self._noise[row])
-
-    def _base_matrix(self) -> FloatArray | None:
-        """$BASE as a 4×4 transform (None for $NULLFRAME), converted when it changes."""
-        base = self.store.get("$BASE")
-        if base is not self._base_seen:
-            frame = self._read_frame("$BASE")
-            self._base_seen = base
-            self._base = frame_matrix(frame) if np.any(frame) else None
-        return self._base
-
-    def _status_turn(self) -> tuple[int, int]:
-        """S and T of the set-point: the configuration the controller commands (a measured
-        axis jittering around 0° by encoder noise does not flip a turn bit)."""
-        key = self._q_set.tobytes()
-        if key != self._st_key:
-            s, t = status_turn(self.model, np.degrees(self._q_set))
-            self._st_key, self._st = key, (int(s), int(t))
-        return self._st
-
-    def publish(self) -> None:
-        """Write this cycle's readings into the store (called by the store on the first read)."""
-        q, qd, tau = self.measure()
-        store, model = self.store, self.model
-        axes = E6Axis.from_numpy(np.concatenate([q, _E6]))
-        store.set_system("$AXIS_ACT", axes, trusted=True)
-        store.set_system("$AXIS_ACT_MEAS", axes, trusted=True)
-        s, t = self._status_turn()
-        xyzabc = matrix_to_frame(fk_matrix(model, q, self._tool, self._base_matrix()))
-        pos = E6Pos.from_numpy(np.concatenate([xyzabc, _E6]), s=int(s), t=int(t))
-        store.set_system("$POS_ACT", pos, trusted=True)
-        store.set_system("$POS_ACT_MES", pos, trusted=True)
-        store.set_system(
-            "$VEL_AXIS_ACT", [float(v) for v in qd / model.max_speed * 100.0] + _ZEROS, trusted=True
-        )
-        store.set_system("$TORQUE_AXIS_ACT", [float(v) for v in tau] + _ZEROS, trusted=True)
-        v = np.zeros(6)
-        mujoco.mj_objectVelocity(
-            self._mj, self._data, mujoco.mjtObj.mjOBJ_SITE, self._tcp_site, v, 0
-        )
-        store.set_system("$VEL_ACT", float(np.linalg.norm(v[3:])), trusted=True)
