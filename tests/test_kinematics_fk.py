@@ -24,7 +24,7 @@ from pyopenshowvar.kinematics import (
 
 M = KR6R900SIXX
 
-# (axes, XYZABC, S, T); A at B = 0 flange-down may come out as +180 or -180 (compared mod 360).
+# (axes, XYZABC, S, T); angles compared mod 360 (the flange-down pose reads A 180, C 180).
 GOLDEN = [
     ((0, -90, 90, 0, 0, 0), (525, 0, 890, 0, 90, 0), 2, 2),
     ((0, 0, 0, 0, 0, 0), (980, 0, 435, 0, 90, 0), 0, 0),
@@ -185,3 +185,38 @@ def test_matrix_frame_round_trip_batched() -> None:
     back = matrix_to_frame(frame_to_matrix(*poses.T))
     assert np.allclose(back, poses, atol=1e-9)
     assert np.array_equal(matrix_to_frame(frame_to_matrix(*poses[3])), back[3])
+
+
+_EXACT = st.sampled_from([-180.0, -90.0, 0.0, 90.0, 180.0])
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.one_of(_EXACT, st.floats(-180.0, 180.0)),
+    st.one_of(_EXACT, st.floats(-90.0, 90.0)),
+    st.one_of(_EXACT, st.floats(-180.0, 180.0)),
+)
+def test_abc_is_in_the_documented_range(a: float, b: float, c: float) -> None:
+    """docs/kinematics.md: A, C in (-180°, 180°], B in [-90°, 90°] — never A -180.0."""
+    r = matrix_from_abc(a, b, c)
+    ga, gb, gc = (float(v) for v in abc_from_matrix(r))
+    assert -180.0 < ga <= 180.0 and -180.0 < gc <= 180.0 and -90.0 <= gb <= 90.0
+    assert rotation_angle_deg(matrix_from_abc(ga, gb, gc), r) < 1e-6
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.lists(
+        st.sampled_from([-180.0, -90.0, 0.0, 90.0, 180.0]) | st.floats(-170, 170),
+        min_size=6,
+        max_size=6,
+    )
+)
+def test_forward_pose_angles_in_range(q: list[float]) -> None:
+    a, b, c = forward(M, q)[3:]
+    assert -180.0 < a <= 180.0 and -180.0 < c <= 180.0 and -90.0 <= b <= 90.0
+
+
+def test_flange_down_is_a_plus_180() -> None:
+    # atan2(-0.0, -1) = -180: the pose the issue reported now reads A 180
+    assert tuple(forward(M, (0, -90, 90, 0, 90, 0))[3:]) == (180.0, 0.0, 180.0)

@@ -61,7 +61,7 @@ def abc_from_matrix(r: npt.ArrayLike) -> tuple[FloatArray, FloatArray, FloatArra
     """KUKA A, B, C (degrees) of rotation matrices ``(..., 3, 3)`` (or the top-left of 4×4).
 
     Returns three arrays of the leading shape (0-d arrays for a single matrix; ``float(a)``
-    works). Near B = ±90° (``cos B < ABC_SINGULAR_COS``) A is 0 and C carries the rotation:
+    works), each angle in (-180°, 180°] (B in [-90°, 90°]). Near B = ±90° (``cos B < ABC_SINGULAR_COS``) A is 0 and C carries the rotation:
     ``C = atan2(r12, r22)`` for B = +90°, ``atan2(-r12, r22)`` for B = -90°.
     """
     m = np.asarray(r, dtype=np.float64)[..., :3, :3]
@@ -81,7 +81,10 @@ def abc_from_matrix(r: npt.ArrayLike) -> tuple[FloatArray, FloatArray, FloatArra
 
 def _clean(deg: FloatArray) -> FloatArray:
     # Rounding noise (1e-15°) and -0.0 would print as "A -0.0" / "-1.2E-15" in KRC text.
-    return np.where(np.abs(deg) < 1e-12, 0.0, deg) + 0.0
+    deg = np.where(np.abs(deg) < 1e-12, 0.0, deg) + 0.0
+    # atan2 gives -180° for a -0.0 sine (a flange pointing straight down comes out as
+    # A -180.0): fold it to +180 so every angle is in the documented (-180°, 180°].
+    return np.where(deg <= -180.0, deg + 360.0, deg)
 
 
 def frame_to_matrix(
