@@ -273,8 +273,30 @@ def test_actuator_rel_moves_relative_to_the_planned_end_point() -> None:
     assert steps >= 2 and x1 - x0 == pytest.approx(2.0 * steps, abs=1e-3)
 
 
+def test_lin_from_home_runs() -> None:
+    """docs/emulator-robot.md: a LIN that starts on the A5 = 0 singularity of HOME is not refused."""
+    from pyopenshowvar.kinematics import forward
+
+    robot = make_robot("cart_path")  # HOME: A5 = 0
+    store = robot.store
+    goal = forward(KR6R900SIXX, HOME) + np.array([0.0, 150.0, -190.0, 10.0, 0.0, 0.0])
+    store.write(
+        "MYPOSARRAY[1]",
+        "{" + ", ".join(f"{k} {v!r}" for k, v in zip("XYZABC", goal.tolist(), strict=True)) + "}",
+    )
+    store.write("PATH_COUNT", "1")
+    store.write("PATH_START", "TRUE")
+    for _ in range(2000):
+        robot.tick()
+        if store.get("PATH_DONE") is True:
+            break
+    assert store.get("PATH_DONE") is True and store.read("$PRO_STATE1") == "#P_ACTIVE"
+    pos = store.get("$POS_ACT")
+    np.testing.assert_allclose([pos[k] for k in "XYZ"], goal[:3], atol=1e-3)  # type: ignore[index]
+
+
 def test_lin_is_straight_and_ends_on_the_pose() -> None:
-    # start away from the A5 = 0 wrist singularity of HOME (a KRC refuses LIN there too)
+    # start away from the A5 = 0 wrist singularity of HOME (test_lin_from_home_runs starts there)
     q0 = np.array([0.0, -80.0, 80.0, 0.0, 30.0, 0.0])
     robot = make_robot("cart_path", start=q0)
     store = robot.store
