@@ -34,9 +34,9 @@ __all__ = ["build_parser", "config_from_args", "main"]
 log = logging.getLogger("kukavarproxy_emu")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(prog: str = "kukavarproxy-emu") -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="kukavarproxy-emu",
+        prog=prog,
         description="KUKAVARPROXY 9.0 emulator (TCP 7000 protocol, UDP 6999 discovery).",
     )
     net = parser.add_argument_group("network")
@@ -214,8 +214,9 @@ async def serve(config: EmulatorConfig) -> None:
         log.info("stopping (%d requests served)", emu.stats.requests)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+def main(argv: Sequence[str] | None = None, *, prog: str = "kukavarproxy-emu") -> int:
+    """Run the emulator until SIGINT/SIGTERM; ``prog`` names the command in help and errors."""
+    parser = build_parser(prog)
     args = parser.parse_args(argv)
     logging.basicConfig(
         level=args.log_level.upper(),

@@ -14,7 +14,7 @@ import asyncio
 import csv
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, TextIO
 
 import typer
 
@@ -121,7 +121,15 @@ def bench(
                         progress.update(task, completed=i + 1)
                         await asyncio.sleep(0)
 
-    run(job)
+    # Open the CSV first: a typo in its path must not cost a whole benchmark run.
+    out = _open_csv(csv_path) if csv_path is not None else None
+    try:
+        run(job)
+    except BaseException:
+        if out is not None:
+            out.close()
+            csv_path.unlink(missing_ok=True)  # type: ignore[union-attr]
+        raise
     results: dict[str, AccessStats] = {}
     for op, values in samples.items():
         st = AccessStats(window=max(1, len(values)))
@@ -129,12 +137,16 @@ def bench(
             st.record(v)
         results[op] = st
     print_report(Console(), results, f"{var} / {write_var}" if writes else var)
-    if csv_path is not None:
-        try:
-            with csv_path.open("w", newline="", encoding="utf-8") as fh:
-                w = csv.writer(fh)
-                w.writerow(["op", "index", "seconds"])
-                for op, values in samples.items():
-                    w.writerows((op, i, f"{v:.9f}") for i, v in enumerate(values, 1))
-        except OSError as exc:
-            fail(EXIT_USAGE, f"cannot write {csv_path}: {exc.strerror or exc}")
+    if out is not None:
+        with out:
+            w = csv.writer(out)
+            w.writerow(["op", "index", "seconds"])
+            for op, values in samples.items():
+                w.writerows((op, i, f"{v:.9f}") for i, v in enumerate(values, 1))
+
+
+def _open_csv(path: Path) -> TextIO:
+    try:
+        return path.open("w", newline="", encoding="utf-8")
+    except OSError as exc:
+        fail(EXIT_USAGE, f"cannot write {path}: {exc.strerror or exc}")

@@ -6,11 +6,13 @@ and a documented exit code — never a traceback:
 
 ====  ==========================================================
 0     success
+1     unexpected internal error (a bug; ``KVP_DEBUG=1`` shows the traceback)
 2     usage error (bad option or argument)
 3     cannot connect / connection lost (also: ``discover`` found nothing)
 4     timeout
 5     unknown variable or refused write
 6     protocol or value-parse error
+7     write accepted, but the robot program stopped right after it
 ====  ==========================================================
 
 This module must stay cheap to import: ``kvp read`` is on the hot path of shell scripts.
@@ -39,29 +41,50 @@ from pyopenshowvar import (
 from pyopenshowvar.errors import KrlValueError, ReadFailedError
 
 EXIT_OK = 0
+EXIT_BUG = 1  # an unexpected exception reached the entry point: a bug, reported in one line
 EXIT_USAGE = 2
 EXIT_CONNECTION = 3
 EXIT_TIMEOUT = 4
 EXIT_VARIABLE = 5
 EXIT_PROTOCOL = 6
+EXIT_STOPPED = 7
 EXIT_INTERRUPTED = 130
 
 T = TypeVar("T")
 
 
 class Opts:
-    """The global options of one ``kvp`` invocation (set by the typer callback)."""
+    """The global options of one ``kvp`` invocation (set by the typer callback).
+
+    ``--emulate`` only records the wish (:attr:`emulate`): a command that talks to "the robot"
+    asks :meth:`endpoint`, which starts the default embedded emulator on first use, while the
+    case studies start one running the program they need. So ``kvp --emulate CMD`` and
+    ``kvp CMD --emulate`` mean the same for every command.
+    """
 
     host = "127.0.0.1"
     port = 7000
     timeout = 2.0
+    emulate = False
     emulator: Any = None
     #: The embedded emulator's plant (``--plant``): "dynamic" or "ideal".
     plant = "dynamic"
 
     @classmethod
+    def reset(cls, host: str, port: int, timeout: float, emulate: bool) -> None:
+        cls.host, cls.port, cls.timeout, cls.emulate = host, port, timeout, emulate
+        cls.emulator = None
+
+    @classmethod
     def where(cls) -> str:
         return f"{cls.host}:{cls.port}"
+
+    @classmethod
+    def endpoint(cls) -> tuple[str, int]:
+        """Host and port to talk to; starts the embedded emulator when ``--emulate`` asked."""
+        if cls.emulate and cls.emulator is None:
+            start_embedded_emulator()
+        return cls.host, cls.port
 
 
 def plant_choice(value: str) -> str:
@@ -71,30 +94,52 @@ def plant_choice(value: str) -> str:
     return value
 
 
-def start_embedded_emulator(ctx: typer.Context) -> Any:
-    """An in-process emulator on an ephemeral port, stopped when the command ends.
+def check_port(value: int) -> int:
+    """typer callback: a TCP/UDP port a client can connect to (1..65535)."""
+    if not 1 <= value <= 0xFFFF:
+        raise typer.BadParameter(f"{value} is not a port (1..65535)")
+    return value
 
-    Idempotent: ``kvp --emulate monitor --emulate`` starts one emulator only.
+
+def check_seconds(value: float) -> float:
+    """typer callback: a finite, positive number of seconds."""
+    if not (math.isfinite(value) and value > 0):
+        raise typer.BadParameter(f"{value:g} is not a positive number of seconds")
+    return value
+
+
+def start_embedded_emulator(ctx: typer.Context | None = None) -> Any:
+    """An in-process emulator on an ephemeral port; :func:`stop_embedded_emulator` ends it.
+
+    Idempotent: ``kvp --emulate monitor --emulate`` starts one emulator only. It answers UDP
+    discovery on an ephemeral port too (to the asker's own port), so ``kvp --emulate
+    discover`` finds it. ``ctx`` (optional) stops it when that command ends; under ``kvp`` the
+    top-level command always does.
     """
     if Opts.emulator is not None:
         return Opts.emulator
     from kukavarproxy_emu import EmulatorConfig, EmulatorThread
 
-    thread = EmulatorThread(EmulatorConfig(host="127.0.0.1", port=0, plant=Opts.plant))
-    thread.start()
+    config = EmulatorConfig(
+        host="127.0.0.1", port=0, discovery=True, udp_port=0, udp_reply_port=0, plant=Opts.plant
+    )
+    Opts.emulator = EmulatorThread(config).start()
+    Opts.host, Opts.port = "127.0.0.1", Opts.emulator.port
+    if ctx is not None:
+        ctx.find_root().call_on_close(stop_embedded_emulator)
+    return Opts.emulator
 
-    def stop() -> None:
+
+def stop_embedded_emulator() -> None:
+    """Stop the emulator :func:`start_embedded_emulator` started, if any (idempotent).
+
+    Called when the command ends, not at interpreter exit: the CLI also runs in-process
+    (typer's CliRunner, scripts calling the app), where an atexit hook would leave the emulator
+    and its robot ticking in a background thread for the rest of the process.
+    """
+    thread, Opts.emulator = Opts.emulator, None
+    if thread is not None:
         thread.stop()
-        if Opts.emulator is thread:
-            Opts.emulator = None
-
-    # Stop it when the command ends, not at interpreter exit: the CLI also runs in-process
-    # (typer's CliRunner, scripts calling the app), where an atexit hook would leave the
-    # emulator and its robot ticking in a background thread for the rest of the process.
-    ctx.find_root().call_on_close(stop)
-    Opts.emulator = thread
-    Opts.host, Opts.port = "127.0.0.1", thread.port
-    return thread
 
 
 def fail(code: int, message: str) -> NoReturn:
@@ -129,7 +174,8 @@ def fail_for(exc: BaseException) -> NoReturn:
 def make_client(**kw: Any) -> Client:
     """A client for the global host/port/timeout (no keep-alive unless asked)."""
     kw.setdefault("keepalive", None)
-    return Client(Opts.host, Opts.port, timeout=Opts.timeout, **kw)
+    host, port = Opts.endpoint()
+    return Client(host, port, timeout=Opts.timeout, **kw)
 
 
 def run(job: Callable[[Client], Awaitable[T]], **client_kw: Any) -> T:

@@ -113,12 +113,19 @@ CASE_STUDIES: list[tuple[str, str, Callable[[Path, float, bool], CaseResult]]] =
     (
         "teleop",
         "teleoperation",
-        _optional("pyopenshowvar_apps.casestudies.teleop", "run_teleoperation", "ext_move_axis", "teleoperation"),
+        _optional(
+            "pyopenshowvar_apps.casestudies.teleop",
+            "run_teleoperation",
+            "ext_move_axis",
+            "teleoperation",
+        ),
     ),
     (
         "haptic",
         "haptic feedback",
-        _optional("pyopenshowvar_apps.casestudies.haptic", "run_haptic", "actuator", "haptic feedback"),
+        _optional(
+            "pyopenshowvar_apps.casestudies.haptic", "run_haptic", "actuator", "haptic feedback"
+        ),
     ),
 ]
 

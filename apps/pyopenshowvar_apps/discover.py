@@ -5,7 +5,9 @@ UDP **7000** (not to the source port), so we send from and listen on one socket 
 ``--listen-port`` (default 7000). Proxies that answer to the sender's own port (C3 Bridge,
 the emulator with ``udp_reply_port=0``) also work with ``--listen-port 0``.
 
-Nothing answering within ``--timeout`` exits 3 with one line on stderr.
+With ``kvp --emulate discover`` the embedded emulator is asked directly (it answers on an
+ephemeral UDP port, to the asker's own port). Nothing answering within ``--timeout`` exits 3
+with one line on stderr.
 """
 
 from __future__ import annotations
@@ -18,7 +20,14 @@ from typing import Annotated
 
 import typer
 
-from pyopenshowvar_apps.common import EXIT_CONNECTION, fail
+from pyopenshowvar_apps.common import (
+    EXIT_CONNECTION,
+    Opts,
+    check_port,
+    check_seconds,
+    fail,
+    start_embedded_emulator,
+)
 
 QUERY = b"WHEREAREYOU?"
 
@@ -89,6 +98,10 @@ def discover_proxies(
         sock.close()
 
 
+def _check_listen_port(value: int) -> int:
+    return value if value == 0 else check_port(value)
+
+
 def discover(
     to: Annotated[
         list[str] | None,
@@ -101,17 +114,32 @@ def discover(
             help="Also broadcast to 255.255.255.255 (default: on unless --to is given).",
         ),
     ] = None,
-    udp_port: Annotated[int, typer.Option("--udp-port", help="Proxies' discovery port.")] = 6999,
+    udp_port: Annotated[
+        int, typer.Option("--udp-port", callback=check_port, help="Proxies' discovery port.")
+    ] = 6999,
     listen_port: Annotated[
         int,
-        typer.Option("--listen-port", help="Local UDP port for answers (KVP answers to 7000)."),
+        typer.Option(
+            "--listen-port",
+            callback=_check_listen_port,
+            help="Local UDP port for answers (KVP answers to 7000; 0: any free port).",
+        ),
     ] = 7000,
-    timeout: Annotated[float, typer.Option("--timeout", help="Seconds to wait for answers.")] = 1.0,
+    timeout: Annotated[
+        float,
+        typer.Option(
+            "--timeout", "-t", callback=check_seconds, help="Seconds to wait for answers."
+        ),
+    ] = 1.0,
     as_json: Annotated[bool, typer.Option("--json", help="Print answers as JSON.")] = False,
 ) -> None:
     """List the KUKAVARPROXY instances that answer UDP WHEREAREYOU? (exit 3 if none)."""
     targets = list(to or [])
     do_broadcast = broadcast if broadcast is not None else not targets
+    if Opts.emulate:  # the embedded emulator answers on its own UDP port, to ours
+        emulator = start_embedded_emulator()
+        targets, do_broadcast = ["127.0.0.1"], False
+        udp_port, listen_port = emulator.emulator.udp_port, 0
     try:
         answers = discover_proxies(
             targets,

@@ -1,7 +1,8 @@
 """The interactive ``kvp`` commands: ``repl`` and ``monitor``.
 
 Only typer is imported here; prompt_toolkit and Textual are imported when the command runs,
-so the other subcommands start fast.
+so the other subcommands start fast. ``--emulate`` is the global flag (before or after the
+command name).
 """
 
 from __future__ import annotations
@@ -13,14 +14,10 @@ from typing import Annotated
 import typer
 
 from pyopenshowvar import KvpError
-from pyopenshowvar_apps.common import EXIT_USAGE, Opts, fail, fail_for, start_embedded_emulator
+from pyopenshowvar_apps.common import EXIT_USAGE, Opts, fail, fail_for
 
 
 def repl(
-    ctx: typer.Context,
-    emulate: Annotated[
-        bool, typer.Option("--emulate", help="Start an embedded emulator and talk to it.")
-    ] = False,
     config: Annotated[
         list[Path] | None,
         typer.Option("--config", help="$CONFIG.DAT whose globals are offered for completion."),
@@ -34,8 +31,7 @@ def repl(
     raw: Annotated[bool, typer.Option("--raw", help="Print raw text instead of tables.")] = False,
 ) -> None:
     """Interactive console: NAME reads, NAME VALUE writes, :watch, :help, :quit (Tab completes)."""
-    if emulate:
-        start_embedded_emulator(ctx)
+    host, port = Opts.endpoint()
     from pyopenshowvar_apps.names import completion_names
     from pyopenshowvar_apps.repl import default_history_path, run_repl
 
@@ -47,8 +43,8 @@ def repl(
     try:
         asyncio.run(
             run_repl(
-                Opts.host,
-                Opts.port,
+                host,
+                port,
                 Opts.timeout,
                 names=names,
                 history=history or default_history_path(),
@@ -60,11 +56,6 @@ def repl(
 
 
 def monitor(
-    ctx: typer.Context,
-    emulate: Annotated[
-        bool,
-        typer.Option("--emulate", help="Start an embedded emulator (a live robot, no hardware)."),
-    ] = False,
     hz: Annotated[float, typer.Option("--hz", help="Refreshes per second.")] = 10.0,
     watch_file: Annotated[
         Path | None,
@@ -78,14 +69,13 @@ def monitor(
     """Live Textual dashboard: joints, pose, torques, plots, status and a watch list."""
     if not 0 < hz <= 50:
         fail(EXIT_USAGE, f"--hz must be in (0, 50], got {hz:g}")
-    if emulate:
-        start_embedded_emulator(ctx)
+    host, port = Opts.endpoint()
     from pyopenshowvar_apps.monitor.app import MonitorApp
     from pyopenshowvar_apps.monitor.watchlist import default_watch_file
 
     app = MonitorApp(
-        Opts.host,
-        Opts.port,
+        host,
+        port,
         timeout=Opts.timeout,
         hz=hz,
         watch_file=watch_file or default_watch_file(),

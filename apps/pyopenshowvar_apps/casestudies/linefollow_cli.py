@@ -1,9 +1,9 @@
 """``kvp linefollow``: the thin command around :func:`~apps.casestudies.linefollow.run_line_following`.
 
-Talks to the robot given by the global ``--host``/``--port`` (or ``kvp --emulate``, which is
-the default emulator running ``follow``: use ``--emulate`` of *this* command instead, which
-starts one running ``cart_path`` with the robot parked at the camera pose). Heavy imports
-(numpy vision, matplotlib) happen only when the command runs.
+Talks to the robot given by the global ``--host``/``--port``; with ``--emulate`` (before or
+after the command name) it starts an embedded emulator running ``cart_path`` with the robot
+parked at the camera pose. Heavy imports (numpy vision, matplotlib) happen only when the
+command runs.
 """
 
 from __future__ import annotations
@@ -16,25 +16,68 @@ import typer
 __all__ = ["linefollow"]
 
 
+def _positive(value: float) -> float:
+    from pyopenshowvar_apps.common import check_seconds
+
+    try:
+        return check_seconds(value)
+    except typer.BadParameter:
+        raise typer.BadParameter(f"{value:g} is not a positive number") from None
+
+
+def _numbers(count: int, kind: type) -> Any:
+    """typer callback: ``'x,y'`` style text of ``count`` numbers (returned unchanged)."""
+
+    def check(text: str | None) -> str | None:
+        if text is None:
+            return None
+        try:
+            values = [kind(v) for v in text.split(",")]
+        except ValueError:
+            values = []
+        if len(values) != count:
+            what = "integers" if kind is int else "numbers"
+            raise typer.BadParameter(f"{text!r} is not {count} comma-separated {what}")
+        return text
+
+    return check
+
+
 def linefollow(
     image: Annotated[
         Path | None, typer.Argument(help="PNG/JPG of the line; omitted: generate one.")
     ] = None,
-    start: Annotated[str | None, typer.Option(help="Start pixel 'x,y' (default: found).")] = None,
-    end: Annotated[str | None, typer.Option(help="End pixel 'x,y' (default: found).")] = None,
-    resolution: Annotated[float, typer.Option(help="Path sampling step, mm.")] = 2.0,
-    scale: Annotated[float, typer.Option(help="Camera scale, mm per pixel.")] = 0.5,
+    start: Annotated[
+        str | None,
+        typer.Option(callback=_numbers(2, int), help="Start pixel 'x,y' (default: found)."),
+    ] = None,
+    end: Annotated[
+        str | None,
+        typer.Option(callback=_numbers(2, int), help="End pixel 'x,y' (default: found)."),
+    ] = None,
+    resolution: Annotated[
+        float, typer.Option(callback=_positive, help="Path sampling step, mm.")
+    ] = 2.0,
+    scale: Annotated[
+        float, typer.Option(callback=_positive, help="Camera scale, mm per pixel.")
+    ] = 0.5,
     table: Annotated[
-        str, typer.Option(help="Image centre in $BASE and its rotation: 'X,Y,Z,A'.")
+        str,
+        typer.Option(
+            callback=_numbers(4, float), help="Image centre in $BASE and its rotation: 'X,Y,Z,A'."
+        ),
     ] = "520,0,300,-90",
-    duration: Annotated[float, typer.Option(help="Target time on the line, s.")] = 10.0,
-    cdis: Annotated[float, typer.Option(help="$APO.CDIS approximation distance, mm.")] = 1.0,
+    duration: Annotated[
+        float, typer.Option(callback=_positive, help="Target time on the line, s.")
+    ] = 10.0,
+    cdis: Annotated[
+        float, typer.Option(min=0.0, help="$APO.CDIS approximation distance, mm.")
+    ] = 1.0,
     seed: Annotated[int, typer.Option(help="Seed of the generated image.")] = 0,
     out: Annotated[Path, typer.Option("--out", help="Output folder.")] = Path("out/linefollow"),
-    emulate: Annotated[
-        bool, typer.Option("--emulate", help="Run on an embedded emulator (cart_path).")
-    ] = False,
-    speed: Annotated[float, typer.Option(help="Emulator speed factor with --emulate.")] = 1.0,
+    speed: Annotated[
+        float, typer.Option(callback=_positive, help="Emulator speed factor with --emulate.")
+    ] = 1.0,
 ) -> None:
     """Follow a line drawn on a table (thesis case study 2): A*, LIN path, $POS_ACT deviation."""
     import asyncio
@@ -66,7 +109,7 @@ def linefollow(
     pose = tuple(float(v) for v in table.split(","))
     host, port, scale_t = Opts.host, Opts.port, 1.0
     emu: Any = None
-    if emulate:
+    if Opts.emulate:  # kvp [--emulate] linefollow [--emulate]: an emulator running cart_path
         from kukavarproxy_emu import EmulatorConfig, EmulatorThread
         from pyopenshowvar_apps.casestudies.linefollow_vision import load_gray
 

@@ -1,8 +1,9 @@
 """``kvp teleop`` and ``kvp haptic``: thin commands over :mod:`.teleop` and :mod:`.haptic`.
 
-``--sim`` starts an in-process emulator running the program the case study needs
-(EXT_MOVE_AXIS or ACTUATOR) with the ``kvp`` latency profile; without it the commands talk to
-``--host/--port`` (a real KRC must run the matching KRL program).
+``--emulate`` (before or after the command name, as for every ``kvp`` command) starts an
+in-process emulator running the program the case study needs (EXT_MOVE_AXIS or ACTUATOR) with
+the ``kvp`` latency profile; without it the commands talk to ``--host/--port`` (a real KRC must
+run the matching KRL program). ``--sim`` is the old, deprecated spelling of ``--emulate``.
 """
 
 from __future__ import annotations
@@ -13,7 +14,13 @@ from typing import Annotated, Any
 
 import typer
 
+from pyopenshowvar_apps.common import EXIT_USAGE, check_seconds, fail
+
 __all__ = ["haptic", "teleop"]
+
+
+#: The deprecated ``--sim`` flag, hidden from --help; ``--emulate`` is the flag everywhere.
+SimFlag = Annotated[bool, typer.Option("--sim", hidden=True, help="Deprecated: use --emulate.")]
 
 
 def _run(program: str, sim: bool, job: Any) -> Any:
@@ -26,6 +33,8 @@ def _run(program: str, sim: bool, job: Any) -> Any:
     thread = None
     host, port = Opts.host, Opts.port
     if sim:
+        typer.echo("kvp: --sim is deprecated, use --emulate", err=True)
+    if sim or Opts.emulate:
         from kukavarproxy_emu import EmulatorConfig, EmulatorThread
 
         thread = EmulatorThread(EmulatorConfig(port=0, program=program, latency="kvp"))
@@ -49,17 +58,33 @@ def _run(program: str, sim: bool, job: Any) -> Any:
     return result
 
 
+def _one_of(*choices: str) -> Any:
+    def check(value: str) -> str:
+        if value not in choices:
+            raise typer.BadParameter(f"{value!r} is not one of {', '.join(choices)}")
+        return value
+
+    return check
+
+
 def teleop(
     mode: Annotated[
-        str, typer.Option(help="position (eq. 2.7) or velocity (eq. 4.2).")
+        str,
+        typer.Option(
+            callback=_one_of("position", "velocity"),
+            help="position (eq. 2.7) or velocity (eq. 4.2).",
+        ),
     ] = "position",
     device: Annotated[
         str, typer.Option(help="figure8, circle, step, keyboard or a CSV path.")
     ] = "figure8",
-    duration: Annotated[float, typer.Option(help="Seconds.")] = 10.0,
-    program: Annotated[str, typer.Option(help="ext_move_axis or follow.")] = "ext_move_axis",
+    duration: Annotated[float, typer.Option(callback=check_seconds, help="Seconds.")] = 10.0,
+    program: Annotated[
+        str,
+        typer.Option(callback=_one_of("ext_move_axis", "follow"), help="ext_move_axis or follow."),
+    ] = "ext_move_axis",
     out: Annotated[Path, typer.Option(help="Output folder.")] = Path("out"),
-    sim: Annotated[bool, typer.Option("--sim", help="Run against an in-process emulator.")] = False,
+    sim: SimFlag = False,
 ) -> None:
     """Case study 3: teleoperate with a hand device (custom IK + PID → MYAXIS)."""
     from pyopenshowvar_apps.casestudies import devices as dev
@@ -73,7 +98,14 @@ def teleop(
     elif device in scripts:
         hand = dev.ScriptedDevice(scripts[device], duration=duration)
     else:
-        hand = dev.ScriptedDevice(dev.replay_csv(device), duration=duration)
+        try:
+            hand = dev.ScriptedDevice(dev.replay_csv(device), duration=duration)
+        except (OSError, ValueError, KeyError) as exc:
+            fail(
+                EXIT_USAGE,
+                f"--device {device}: not figure8, circle, step, keyboard or a readable CSV "
+                f"with columns t,x,y,z ({exc})",
+            )
     _run(
         program,
         sim,
@@ -89,10 +121,10 @@ def teleop(
 
 
 def haptic(
-    duration: Annotated[float, typer.Option(help="Seconds.")] = 8.0,
-    payload: Annotated[float, typer.Option(help="Held payload, kg.")] = 0.0,
+    duration: Annotated[float, typer.Option(callback=check_seconds, help="Seconds.")] = 8.0,
+    payload: Annotated[float, typer.Option(min=0.0, help="Held payload, kg.")] = 0.0,
     out: Annotated[Path, typer.Option(help="Output folder.")] = Path("out"),
-    sim: Annotated[bool, typer.Option("--sim", help="Run against an in-process emulator.")] = False,
+    sim: SimFlag = False,
 ) -> None:
     """Case study 4: haptic force feedback through MYPOS / ACTUATOR and $TORQUE_AXIS_ACT."""
     from pyopenshowvar_apps.casestudies.haptic import run_haptic

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import json
+import math
 from typing import Annotated, Any
 
 import typer
 
 from pyopenshowvar import Client
-from pyopenshowvar_apps.common import run, to_jsonable
+from pyopenshowvar_apps.common import EXIT_STOPPED, EXIT_USAGE, Opts, fail, run, to_jsonable
+from pyopenshowvar_apps.writecheck import STOP_WINDOW, check_literal, checked_write
 
 ORDER = 10
 
@@ -36,12 +38,43 @@ def read(
 
 def write(
     name: Annotated[str, typer.Argument(help="Variable, e.g. '$OV_PRO' or 'MYAXIS'.")],
-    value: Annotated[str, typer.Argument(help="KRL literal, e.g. 50 or '{A1 10.0, A2 -80.0}'.")],
+    value: Annotated[
+        str,
+        typer.Argument(help="KRL literal, e.g. 50, -5 or '{A1 10.0, A2 -80.0}'."),
+    ],
+    no_check: Annotated[
+        bool, typer.Option("--no-check", help="Send VALUE as it is, without parsing it first.")
+    ] = False,
+    stop_window: Annotated[
+        float,
+        typer.Option(
+            "--stop-window",
+            help="Seconds to watch $PRO_STATE1/$STOPMESS for a program stop after the write "
+            "(0: do not watch).",
+        ),
+    ] = STOP_WINDOW,
 ) -> None:
-    """Write a KRL literal to a variable; prints the proxy's echo."""
-    typer.echo(run(lambda kvp: kvp.write(name, value)))
+    """Write a KRL literal to a variable; prints the proxy's echo.
+
+    The literal is checked before it is sent; a refusal says its likely reason; a write that
+    stops the running robot program (e.g. beyond a software limit) is reported, exit code 7.
+    """
+    if not (math.isfinite(stop_window) and stop_window >= 0):
+        fail(EXIT_USAGE, f"--stop-window must be >= 0 seconds, got {stop_window:g}")
+    if not no_check and (problem := check_literal(value)) is not None:
+        lines = problem.lines(value)
+        fail(EXIT_USAGE, "\n".join([f"{value!r} is not a KRL literal: {lines[0]}", *lines[1:]]))
+    outcome = run(lambda kvp: checked_write(kvp, name, value, window=stop_window))
+    typer.echo(outcome.echo)
+    if outcome.stop is not None:
+        fail(
+            EXIT_STOPPED,
+            f"the robot program stopped right after writing {name!r} on {Opts.where()}: "
+            f"{outcome.stop.describe()}",
+        )
 
 
 def register(app: typer.Typer) -> None:
     app.command("read")(read)
-    app.command("write")(write)
+    # a value may start with "-" (kvp write '$OV_PRO' -5): unknown "options" are arguments
+    app.command("write", context_settings={"ignore_unknown_options": True})(write)
