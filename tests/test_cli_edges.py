@@ -176,7 +176,7 @@ def test_a_write_that_stops_the_program_is_reported(emulator_thread: Any) -> Non
     port = str(emulator_thread.port)
     res = run("--port", port, "write", "MYAXIS", "{A1 10.0}")
     assert res.exit_code == 0 and res.stderr == ""
-    res = run("--port", port, "write", "MYAXIS", "{A1 9999}")
+    res = run("--port", port, "write", "MYAXIS", "{A1 9999}", "--stop-window", "3")  # load
     assert res.exit_code == EXIT_STOPPED, res.output
     assert res.stdout.strip() == "{A1 9999}"  # the controller accepted it
     assert "stopped right after writing 'MYAXIS'" in res.stderr

@@ -108,6 +108,13 @@ def check_seconds(value: float) -> float:
     return value
 
 
+def check_window(value: float) -> float:
+    """typer callback: a finite number of seconds >= 0 (0: off)."""
+    if not (math.isfinite(value) and value >= 0):
+        raise typer.BadParameter(f"{value:g} is not a number of seconds >= 0")
+    return value
+
+
 def start_embedded_emulator(ctx: typer.Context | None = None) -> Any:
     """An in-process emulator on an ephemeral port; :func:`stop_embedded_emulator` ends it.
 

@@ -3,13 +3,21 @@
 Completion draws on three sources: a built-in list of common KRC4 system variables, the
 names an emulator's store declares (``--emulate``), and the globals of ``$CONFIG.DAT``-style
 files given with ``--config`` (parsed with :func:`kukavarproxy_emu.datfile.parse_dat`).
-Arrays are offered both bare and as ``NAME[]`` (the whole-array read).
+
+Names that can only read as unknown are not offered: a bare 1-D array or text name
+(KUKAVARPROXY reads ``NAME[]`` or ``NAME[i]``, so only ``NAME[]`` is offered), ``NAME[]`` of a
+2-D array, and, with an emulator, the built-in names it does not have. Names that read as
+unknown *now* but can be written are offered with a mark saying why (:class:`Names`): a
+variable never given a value (``MYE6ARRAY[]`` and ``MYE6POS`` on a fresh emulator, a
+``--config`` declaration without one), a 2-D array's bare name. With an emulator the marks are
+live: a variable written since is no longer marked.
 """
 
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -52,34 +60,90 @@ def is_motion_variable(name: str) -> bool:
     return base_name(name) in MOTION_VARIABLES
 
 
-def store_names(store: Any) -> list[str]:
-    """The names an emulator's :class:`VariableStore` declares, arrays also as ``NAME[]``."""
-    out: list[str] = []
-    for name, value in store.snapshot().items():
-        out.append(name)
-        if isinstance(value, list):
-            out.append(f"{name}[]")
-    return out
+GRID_NOTE = "2-D array: read NAME[i, j]"
+UNSET_NOTE = "no value yet: reads as unknown"
 
 
-def dat_names(paths: Iterable[Path]) -> list[str]:
-    """Global names declared in ``$CONFIG.DAT``-style files (arrays also as ``NAME[]``)."""
+@dataclass
+class Names:
+    """Names to complete, each with a note ("" when it reads) that may be computed live."""
+
+    notes: dict[str, str] = field(default_factory=dict)
+    live: Callable[[str], str | None] | None = None
+
+    def __iter__(self) -> Any:
+        return iter(sorted(self.notes, key=lambda n: (n.lstrip("$@"), n)))
+
+    def __len__(self) -> int:
+        return len(self.notes)
+
+    def note(self, name: str) -> str:
+        """Why ``name`` would read as unknown now, or ""."""
+        if self.live is not None:
+            live = self.live(name)
+            if live is not None:
+                return live
+        return self.notes.get(name, "")
+
+
+def store_names(store: Any) -> Names:
+    """The names an emulator's :class:`VariableStore` declares (1-D arrays and texts as
+    ``NAME[]``), marked live by reading them."""
+    notes: dict[str, str] = {}
+    for name in store.snapshot():
+        decl = store.declaration(name)
+        dims = tuple(getattr(decl, "dims", ()))
+        if getattr(decl, "text_len", 0) or len(dims) == 1:  # text or 1-D array: NAME[]
+            notes[f"{name}[]"] = ""
+        elif dims:  # a KRC prints no 2-D array whole
+            notes[name] = GRID_NOTE
+        else:
+            notes[name] = ""
+
+    def live(name: str) -> str | None:
+        if notes.get(name) or name not in notes:
+            return None  # arrays keep their static note; foreign names are not ours
+        try:
+            store.read(name)
+        except Exception:  # the store's UnknownVariable: declared, never given a value
+            return (
+                UNSET_NOTE if not name.endswith("[]") else "not every element set: reads as unknown"
+            )
+        return ""
+
+    return Names(notes, live)
+
+
+def dat_names(paths: Iterable[Path]) -> Names:
+    """Global names declared in ``$CONFIG.DAT``-style files (1-D arrays as ``NAME[]``)."""
     from kukavarproxy_emu.datfile import parse_dat
 
-    out: list[str] = []
+    notes: dict[str, str] = {}
     for path in paths:
         dat = parse_dat(Path(path).read_text(encoding="latin-1"), str(path))
+        assigned = {base_name(a.target) for a in dat.assignments}
         for decl in dat.declarations:
-            out.append(decl.name)
-            if decl.dims:
-                out.append(f"{decl.name}[]")
-    return out
+            unset = decl.init is None and decl.name.upper() not in assigned
+            if len(decl.dims) == 1:
+                notes[f"{decl.name}[]"] = f"no value in {Path(path).name}" if unset else ""
+            elif decl.dims:
+                notes[decl.name] = GRID_NOTE
+            else:
+                notes[decl.name] = f"no value in {Path(path).name}" if unset else ""
+    return Names(notes)
 
 
-def completion_names(store: Any = None, config_files: Iterable[Path] = ()) -> list[str]:
-    """Every name to complete: built-in system variables + store + config globals, sorted."""
-    names = set(KRC4_SYSTEM_VARIABLES)
-    if store is not None:
-        names.update(store_names(store))
-    names.update(dat_names(config_files))
-    return sorted(names, key=lambda n: (n.lstrip("$@"), n))
+def completion_names(store: Any = None, config_files: Iterable[Path] = ()) -> Names:
+    """Every name to complete, with notes: built-in system variables (those the emulator has,
+    with one) + the emulator's names + config globals."""
+    builtin = Names({n: "" for n in KRC4_SYSTEM_VARIABLES})
+    if store is None:
+        names = builtin
+    else:
+        names = store_names(store)
+        for n in KRC4_SYSTEM_VARIABLES:
+            if n.startswith("@"):  # answered by the proxy itself, not the controller
+                names.notes[n] = ""
+    for n, note in dat_names(config_files).notes.items():
+        names.notes.setdefault(n, note)
+    return names

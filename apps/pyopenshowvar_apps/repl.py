@@ -3,11 +3,15 @@
 * ``NAME`` reads; ``NAME VALUE`` or ``NAME = VALUE`` writes (the value is everything after the
   name, so ``MYAXIS {A1 10.5, A2 -80.0}`` works unquoted); every answer shows the round trip;
 * typed pretty printing (``:raw`` toggles the proxy's text instead);
-* line editing, persistent history and tab completion (prompt_toolkit) on a terminal; plain
-  lines from a pipe;
+* line editing, persistent history (Enter in a Ctrl-R search runs the line, as in bash) and
+  tab completion (prompt_toolkit) on a terminal; plain lines from a pipe, where the exit code
+  is the first failed command's (the codes of ``kvp read``/``write``);
+* writes are checked like ``kvp write``: the literal before sending, the reason of a refusal,
+  a program stop right after (:mod:`pyopenshowvar_apps.writecheck`);
 * ``:watch NAME... [HZ]`` live until Ctrl-C, ``:stats``, ``:ping``, ``:help``, ``:quit``/``q``;
-* the connection is kept alive (``PING`` every 10 s) and re-opened after a drop, with a message,
-  without leaving the session.
+  Ctrl-C while a command waits abandons it and returns to the prompt;
+* the connection is kept alive (``PING`` every 10 s) and re-opened after a drop, with ONE
+  message per drop, without leaving the session.
 """
 
 from __future__ import annotations
@@ -17,7 +21,7 @@ import os
 import signal
 import sys
 import time
-from collections.abc import Iterable
+from collections.abc import Coroutine, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -32,10 +36,19 @@ from pyopenshowvar import (
     UnknownVariableError,
     WriteRefusedError,
 )
+from pyopenshowvar_apps.common import (
+    EXIT_CONNECTION,
+    EXIT_PROTOCOL,
+    EXIT_STOPPED,
+    EXIT_TIMEOUT,
+    EXIT_USAGE,
+    EXIT_VARIABLE,
+)
 from pyopenshowvar_apps.pretty import render_text
+from pyopenshowvar_apps.writecheck import STOP_WINDOW, check_literal, checked_write
 
 HELP = """\
-[bold]NAME[/]                read a variable, e.g. [cyan]$AXIS_ACT[/], [cyan]$TORQUE_AXIS_ACT[][/], [cyan]MYE6ARRAY[2].A1[/]
+[bold]NAME[/]                read a variable, e.g. [cyan]$AXIS_ACT[/], [cyan]$TORQUE_AXIS_ACT[][/], [cyan]$POS_ACT.X[/]
 [bold]NAME VALUE[/]          write a KRL literal, e.g. [cyan]MYAXIS {A1 10.5, A2 -80.0}[/]
 [bold]NAME = VALUE[/]        the same
 [bold]:watch NAME... [HZ][/] live values until Ctrl-C (default 2 Hz)
@@ -44,7 +57,8 @@ HELP = """\
 [bold]:ping[/]               one keep-alive round trip
 [bold]:help[/]               this text
 [bold]:quit[/], [bold]q[/], Ctrl-D    leave
-Tab completes variable names; ↑/↓ and Ctrl-R search the history."""
+Tab completes variable names; ↑/↓ and Ctrl-R search the history (Enter runs the line found).
+Ctrl-C abandons a command that waits."""
 
 
 def default_history_path() -> Path:
@@ -76,11 +90,24 @@ def split_command(line: str) -> tuple[str, str | None]:
 class Repl:
     """One console session on one :class:`Client` (which may reconnect underneath)."""
 
-    def __init__(self, client: Client, console: Console, *, raw: bool = False) -> None:
+    def __init__(
+        self,
+        client: Client,
+        console: Console,
+        *,
+        raw: bool = False,
+        stop_window: float = STOP_WINDOW,
+    ) -> None:
         self.client = client
         self.console = console
         self.raw = raw
+        self.stop_window = stop_window
+        #: Exit code of the first command that failed (a piped script exits with it).
+        self.failure: int | None = None
         self._was_connected = False
+        self._lost_reported = False
+        self._writing: str | None = None
+        self._quiet_reconnect = False
 
     # -------------------------------------------------------------------- commands
     async def handle(self, line: str) -> bool:
@@ -95,7 +122,13 @@ class Repl:
             return True
         name, value = split_command(line)
         if value == "":
-            self.error(f"missing value after {name!r} (write: NAME VALUE or NAME = VALUE)")
+            self.fail(
+                EXIT_USAGE, f"missing value after {name!r} (write: NAME VALUE or NAME = VALUE)"
+            )
+            return True
+        if value is not None and (problem := check_literal(value)) is not None:
+            lines = problem.lines(value)
+            self.fail(EXIT_USAGE, f"not a KRL literal: {lines[0]}", *lines[1:])
             return True
         await self._guarded(self._write(name, value) if value is not None else self._read(name))
         return True
@@ -116,13 +149,19 @@ class Repl:
 
     async def _write(self, name: str, value: str) -> None:
         t0 = time.perf_counter()
-        echo = await self.client.write(name, value)
+        self._writing = name
+        try:
+            outcome = await checked_write(self.client, name, value, window=self.stop_window)
+        finally:
+            self._writing = None
         ms = (time.perf_counter() - t0) * 1e3
         self.console.print(
             Text("written", style="green"),
-            Text(f"{name} = {echo}"),
+            Text(f"{name} = {outcome.echo}"),
             Text(f" ({ms:.1f} ms)", style="dim"),
         )
+        if outcome.stop is not None:
+            self.fail(EXIT_STOPPED, f"the robot program stopped: {outcome.stop.describe()}")
 
     async def _meta(self, line: str) -> None:
         cmd, *args = line.split()
@@ -144,11 +183,11 @@ class Repl:
             if args and _is_number(args[-1]):
                 hz = max(0.1, min(100.0, float(args.pop())))
             if not args:
-                self.error("usage: :watch NAME [NAME...] [HZ]")
+                self.fail(EXIT_USAGE, "usage: :watch NAME [NAME...] [HZ]")
                 return
             await self._guarded(self._watch(args, hz))
         else:
-            self.error(f"unknown command {cmd} (:help lists them)")
+            self.fail(EXIT_USAGE, f"unknown command {cmd} (:help lists them)")
 
     async def _ping(self) -> None:
         self.console.print(f"PONG ({await self.client.ping() * 1e3:.1f} ms)")
@@ -161,7 +200,10 @@ class Repl:
         loop = asyncio.get_running_loop()
         loop.add_signal_handler(signal.SIGINT, stop.set)
         try:
-            await self.client.read_many(names)  # fail early: unknown names, connection
+            first = await self.client.read_many(names)  # fail early: unknown names, connection
+            for r in first.values():
+                if r.error is not None:
+                    raise r.error
             self.console.print(Text(f"watching at {hz:g} Hz — Ctrl-C stops", style="dim"))
             with Live(console=self.console, auto_refresh=False) as live:
                 while not stop.is_set():
@@ -182,44 +224,60 @@ class Repl:
             loop.remove_signal_handler(signal.SIGINT)
 
     # -------------------------------------------------------------------- errors
-    def error(self, message: str) -> None:
+    def fail(self, code: int, message: str, *more: str) -> None:
+        """Report a failed command (one red line, plus e.g. a caret line) and remember it."""
+        if self.failure is None:
+            self.failure = code
         self.console.print(Text(message, style="bold red"))
+        for line in more:
+            self.console.print(Text(line), highlight=False)
 
-    async def _guarded(self, job: Any) -> None:
+    async def _guarded(self, job: Coroutine[Any, Any, None]) -> None:
         """Run one command; report errors in one line and keep the session."""
-        await self._ensure_connected()
+        if not await self._ensure_connected():
+            job.close()
+            return
         try:
             await job
         except UnknownVariableError as exc:
-            self.error(f"unknown variable: {exc.name!r} on {self.client.endpoint}")
+            self.fail(EXIT_VARIABLE, f"unknown variable: {exc.name!r} on {self.client.endpoint}")
         except WriteRefusedError as exc:
-            self.error(
-                f"write refused: {exc.name!r} on {self.client.endpoint} (read-only, unknown or wrong type)"
-            )
+            self.fail(EXIT_VARIABLE, str(exc))
         except KvpTimeoutError as exc:
-            self.error(f"timeout: {exc}")
+            self.fail(EXIT_TIMEOUT, f"timeout: {exc}")
         except KvpConnectionError as exc:
-            self.error(f"connection lost: {exc}")
-            await self._ensure_connected()
+            # One message for the drop; the next command reconnects without another.
+            self._lost_reported = True
+            self.fail(EXIT_CONNECTION, f"connection lost: {exc}; the next command reconnects")
         except KvpError as exc:
-            self.error(str(exc))
+            self.fail(EXIT_PROTOCOL, str(exc))
 
-    async def _ensure_connected(self) -> None:
+    async def _ensure_connected(self) -> bool:
+        """Connected (reconnecting if needed)? At most one line says what happened."""
         if self.client.connected:
             self._was_connected = True
-            return
-        if self._was_connected:
-            self.console.print(
-                Text(f"connection to {self.client.endpoint} lost; reconnecting…", style="yellow")
-            )
+            return True
         try:
             await self.client.connect()
         except KvpError as exc:
-            self.error(f"still disconnected ({exc}); the next command retries")
-            return
-        if self._was_connected:
-            self.console.print(Text(f"reconnected to {self.client.endpoint}", style="green"))
+            self._quiet_reconnect = False
+            if self._lost_reported:
+                message = f"still not connected to {self.client.endpoint}: {exc}"
+            else:
+                message = f"connection to {self.client.endpoint} lost and not back: {exc}"
+            self._lost_reported = True
+            self.fail(EXIT_CONNECTION, f"{message} (the next command tries again)")
+            return False
+        if self._was_connected and not (self._quiet_reconnect or self._lost_reported):
+            # the drop was not reported yet: this is its one message
+            self.console.print(
+                Text(
+                    f"reconnected to {self.client.endpoint} after a lost connection", style="yellow"
+                )
+            )
         self._was_connected = True
+        self._lost_reported = self._quiet_reconnect = False
+        return True
 
     # -------------------------------------------------------------------- input loop
     async def run(self, names: Iterable[str], history: Path) -> None:
@@ -228,21 +286,28 @@ class Repl:
             highlight=False,
         )
         if sys.stdin.isatty():
-            await self._run_prompt(list(names), history)
+            await self._run_prompt(names, history)
         else:
             await self._run_pipe()
 
-    async def _run_prompt(self, names: list[str], history: Path) -> None:
+    async def _run_prompt(self, names: Iterable[str], history: Path) -> None:
         from prompt_toolkit import PromptSession
         from prompt_toolkit.history import FileHistory
+        from prompt_toolkit.key_binding import KeyBindings
+        from prompt_toolkit.key_binding.bindings.search import accept_search_and_accept_input
 
         from pyopenshowvar_apps.completion import NameCompleter
 
+        keys = KeyBindings()
+        # Enter in a Ctrl-R search runs the line found, as bash does (prompt_toolkit's default
+        # only ends the search and leaves the line for editing).
+        keys.add("enter")(accept_search_and_accept_input)
         history.parent.mkdir(parents=True, exist_ok=True)
         session: PromptSession[str] = PromptSession(
             history=FileHistory(str(history)),
             completer=NameCompleter(names),
             complete_while_typing=False,
+            key_bindings=keys,
         )
         while True:
             try:
@@ -251,8 +316,37 @@ class Repl:
                 continue
             except EOFError:
                 break
-            if not await self.handle(line):
+            if not await self._interruptible(line):
                 break
+
+    async def _interruptible(self, line: str) -> bool:
+        """Run one line; Ctrl-C (SIGINT while no prompt is shown) abandons it."""
+        loop = asyncio.get_running_loop()
+        task = loop.create_task(self.handle(line))
+        loop.add_signal_handler(signal.SIGINT, task.cancel)
+        try:
+            return await task
+        except asyncio.CancelledError:
+            if not task.cancelled():
+                raise
+            if self._writing is not None:
+                self.console.print(
+                    Text(
+                        f"interrupted: the write to {self._writing} may or may not have been "
+                        "applied (read it to see)",
+                        style="yellow",
+                    )
+                )
+                self._writing = None
+            else:
+                self.console.print(Text("interrupted", style="yellow"))
+            # KUKAVARPROXY answers in order: the abandoned reply would hold up the next
+            # command on this connection, so start the next one on a fresh connection.
+            await self.client.close()
+            self._quiet_reconnect = True
+            return True
+        finally:
+            loop.remove_signal_handler(signal.SIGINT)
 
     async def _run_pipe(self) -> None:
         loop = asyncio.get_running_loop()
@@ -271,9 +365,26 @@ def _is_number(text: str) -> bool:
 
 
 async def run_repl(
-    host: str, port: int, timeout: float, *, names: Iterable[str], history: Path, raw: bool
-) -> None:
-    """Connect (raises KvpError when the first connection fails) and run the console."""
+    host: str,
+    port: int,
+    timeout: float,
+    *,
+    names: Iterable[str],
+    history: Path,
+    raw: bool,
+    stop_window: float = STOP_WINDOW,
+) -> int:
+    """Connect (raises KvpError when the first connection fails) and run the console.
+
+    Returns the exit code: 0 on a terminal; from a pipe, the first failed command's code.
+    """
     client = Client(host, port, timeout=timeout, auto_reconnect=True, keepalive=10.0)
+    # soft_wrap: a line is printed as one line (the terminal wraps it, a pipe keeps it whole);
+    # tables still fit the console width.
+    console = Console(highlight=False, soft_wrap=True)
     async with client:
-        await Repl(client, Console(highlight=False), raw=raw).run(names, history)
+        repl = Repl(client, console, raw=raw, stop_window=stop_window)
+        await repl.run(names, history)
+    if sys.stdin.isatty():
+        return 0
+    return repl.failure or 0

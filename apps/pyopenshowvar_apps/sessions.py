@@ -14,7 +14,8 @@ from typing import Annotated
 import typer
 
 from pyopenshowvar import KvpError
-from pyopenshowvar_apps.common import EXIT_USAGE, Opts, fail, fail_for
+from pyopenshowvar_apps.common import EXIT_USAGE, Opts, check_window, fail, fail_for
+from pyopenshowvar_apps.writecheck import STOP_WINDOW, STOP_WINDOW_HELP
 
 
 def repl(
@@ -29,6 +30,9 @@ def repl(
         ),
     ] = None,
     raw: Annotated[bool, typer.Option("--raw", help="Print raw text instead of tables.")] = False,
+    stop_window: Annotated[
+        float, typer.Option("--stop-window", callback=check_window, help=STOP_WINDOW_HELP)
+    ] = STOP_WINDOW,
 ) -> None:
     """Interactive console: NAME reads, NAME VALUE writes, :watch, :help, :quit (Tab completes)."""
     host, port = Opts.endpoint()
@@ -41,7 +45,7 @@ def repl(
     except (OSError, ValueError) as exc:
         fail(EXIT_USAGE, f"cannot read --config: {exc}")
     try:
-        asyncio.run(
+        code = asyncio.run(
             run_repl(
                 host,
                 port,
@@ -49,10 +53,12 @@ def repl(
                 names=names,
                 history=history or default_history_path(),
                 raw=raw,
+                stop_window=stop_window,
             )
         )
     except KvpError as exc:
         fail_for(exc)
+    raise typer.Exit(code)
 
 
 def monitor(
@@ -65,6 +71,9 @@ def monitor(
             help="Watch-list JSON [~/.config/kvp/monitor.json].",
         ),
     ] = None,
+    stop_window: Annotated[
+        float, typer.Option("--stop-window", callback=check_window, help=STOP_WINDOW_HELP)
+    ] = STOP_WINDOW,
 ) -> None:
     """Live Textual dashboard: joints, pose, torques, plots, status and a watch list."""
     if not 0 < hz <= 50:
@@ -80,5 +89,6 @@ def monitor(
         hz=hz,
         watch_file=watch_file or default_watch_file(),
         emulated=Opts.emulator is not None,
+        stop_window=stop_window,
     )
     app.run()

@@ -3,14 +3,26 @@
 from __future__ import annotations
 
 import json
-import math
 from typing import Annotated, Any
 
 import typer
 
 from pyopenshowvar import Client
-from pyopenshowvar_apps.common import EXIT_STOPPED, EXIT_USAGE, Opts, fail, run, to_jsonable
-from pyopenshowvar_apps.writecheck import STOP_WINDOW, check_literal, checked_write
+from pyopenshowvar_apps.common import (
+    EXIT_STOPPED,
+    EXIT_USAGE,
+    Opts,
+    check_window,
+    fail,
+    run,
+    to_jsonable,
+)
+from pyopenshowvar_apps.writecheck import (
+    STOP_WINDOW,
+    STOP_WINDOW_HELP,
+    check_literal,
+    checked_write,
+)
 
 ORDER = 10
 
@@ -46,12 +58,7 @@ def write(
         bool, typer.Option("--no-check", help="Send VALUE as it is, without parsing it first.")
     ] = False,
     stop_window: Annotated[
-        float,
-        typer.Option(
-            "--stop-window",
-            help="Seconds to watch $PRO_STATE1/$STOPMESS for a program stop after the write "
-            "(0: do not watch).",
-        ),
+        float, typer.Option("--stop-window", callback=check_window, help=STOP_WINDOW_HELP)
     ] = STOP_WINDOW,
 ) -> None:
     """Write a KRL literal to a variable; prints the proxy's echo.
@@ -59,8 +66,6 @@ def write(
     The literal is checked before it is sent; a refusal says its likely reason; a write that
     stops the running robot program (e.g. beyond a software limit) is reported, exit code 7.
     """
-    if not (math.isfinite(stop_window) and stop_window >= 0):
-        fail(EXIT_USAGE, f"--stop-window must be >= 0 seconds, got {stop_window:g}")
     if not no_check and (problem := check_literal(value)) is not None:
         lines = problem.lines(value)
         fail(EXIT_USAGE, "\n".join([f"{value!r} is not a KRL literal: {lines[0]}", *lines[1:]]))

@@ -3,8 +3,14 @@
 One asyncio task polls every ``1/hz`` seconds with ONE ``read_many`` (panels + watch list).
 A lost connection or a timeout is shown in the status line and retried once a second
 (``Client(auto_reconnect=True)``), so the monitor recovers by itself when the controller or
-the emulator comes back. Writes go through the same client; writing a motion variable
-(:data:`apps.names.MOTION_VARIABLES`) asks for confirmation first.
+the emulator comes back. Writes go through the same client, checked like ``kvp write``
+(:mod:`pyopenshowvar_apps.writecheck`); writing a motion variable
+(:data:`pyopenshowvar_apps.names.MOTION_VARIABLES`) asks for confirmation first.
+
+The layout grows with the terminal: at 80×24 everything fits, and a larger terminal gives the
+joint bars, the access-time sparkline, the plots and the watch table more room. On the Watch
+tab the table has the focus, so ↑/↓ move the selection that ``d`` and ``e`` act on, and the
+pane below the table shows the selected value whole (typed, wrapped to the width).
 """
 
 from __future__ import annotations
@@ -14,21 +20,26 @@ import time
 from pathlib import Path
 from typing import ClassVar
 
+from rich.console import RenderableType
 from rich.text import Text
 from textual.app import App, ComposeResult
 from textual.binding import Binding, BindingType
 from textual.containers import Horizontal, Vertical
 from textual.widgets import DataTable, Footer, Static, TabbedContent, TabPane
+from textual.widgets.data_table import ColumnKey
 
 from pyopenshowvar import Client, KvpConnectionError, KvpError, KvpTimeoutError
 from pyopenshowvar_apps.names import is_motion_variable
+from pyopenshowvar_apps.pretty import render_text
+from pyopenshowvar_apps.writecheck import STOP_WINDOW, check_literal, checked_write
 
 from .dialogs import ConfirmDialog, InputDialog
 from .state import RobotState
 from .watchlist import WatchList
-from .widgets import JointsPanel, PlotsPanel, PosePanel, ProgramPanel, StatsPanel
+from .widgets import DetailPane, JointsPanel, PlotsPanel, PosePanel, ProgramPanel, StatsPanel
 
 RETRY_SECONDS = 1.0
+NAME_WIDTH = 22
 
 
 class MonitorApp(App[None]):
@@ -40,14 +51,18 @@ class MonitorApp(App[None]):
     #status { height: 1; background: $boost; padding: 0 1; }
     #status.lost { background: $error 40%; }
     #robot-top { height: auto; }
-    JointsPanel { width: 46; }
-    #right { width: 1fr; height: auto; }
-    DataTable { height: 1fr; }
+    JointsPanel { width: 1fr; min-width: 46; }
+    #right { width: 34; height: auto; }
+    #watch-table { height: 1fr; min-height: 3; }
+    #watch-detail { height: auto; max-height: 50%; border-top: solid $primary; padding: 0 1; }
     #watch-hint { height: 1; color: $text-muted; }
-    TabPane { padding: 0; }
+    TabbedContent, ContentSwitcher { height: 1fr; }
+    TabPane { padding: 0; height: 1fr; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("q", "quit", "Quit"),
+        # Ctrl-C quits as in any terminal program (Textual's default only says how to quit).
+        Binding("ctrl+c", "quit", "Quit", show=False, priority=True),
         Binding("1", "tab('robot')", "Robot"),
         Binding("2", "tab('plots')", "Plots"),
         Binding("3", "tab('watch')", "Watch"),
@@ -66,8 +81,10 @@ class MonitorApp(App[None]):
         hz: float = 10.0,
         watch_file: Path | None = None,
         emulated: bool = False,
+        stop_window: float = STOP_WINDOW,
     ) -> None:
         super().__init__()
+        self.stop_window = stop_window
         self.host, self.port, self.hz = host, port, hz
         self.client = Client(host, port, timeout=timeout, auto_reconnect=True, keepalive=None)
         self.state = RobotState()
@@ -94,8 +111,10 @@ class MonitorApp(App[None]):
                 yield PlotsPanel(id="plot-panel")
             with TabPane("Watch", id="watch"):
                 yield DataTable(id="watch-table", cursor_type="row", zebra_stripes=True)
+                yield DetailPane("", id="watch-detail")
                 yield Static(
-                    "a add · d remove · e edit & write · saved automatically", id="watch-hint"
+                    "↑↓ select · a add · d remove · e edit & write · saved automatically",
+                    id="watch-hint",
                 )
         yield Footer()
 
@@ -105,8 +124,8 @@ class MonitorApp(App[None]):
         self.query_one("#program").border_title = "program"
         self.query_one("#stats").border_title = "access time (this monitor)"
         table = self.query_one("#watch-table", DataTable)
-        table.add_column("variable", key="name", width=22)
-        table.add_column("value", key="value")
+        table.add_column("variable", key="name", width=NAME_WIDTH)
+        table.add_column("value", key="value", width=20)
         for name in self.watchlist.names:
             table.add_row(name, "…", key=name)
         self._task = asyncio.get_running_loop().create_task(self._poll_loop())
@@ -197,14 +216,52 @@ class MonitorApp(App[None]):
             self.query_one(PlotsPanel).refresh_from(self.state)
         elif active == "watch":
             table = self.query_one("#watch-table", DataTable)
+            width = self._fit_watch_columns()
             for name in self.watchlist.names:
                 value = self.state.watch.get(name, "…")
+                if len(value) > width:  # whole in the pane below
+                    value = value[: width - 1] + "…"
                 try:
-                    table.update_cell(name, "value", value, update_width=True)
+                    table.update_cell(name, "value", value)
                 except Exception:  # row just removed by the user
                     pass
+            self._refresh_detail()
+
+    def _fit_watch_columns(self) -> int:
+        """Give the value column the table's remaining width; returns that width."""
+        table = self.query_one("#watch-table", DataTable)
+        # each column has one cell of padding on either side; keep one cell for a scrollbar
+        width = max(10, table.size.width - NAME_WIDTH - 2 * table.cell_padding * 2 - 1)
+        column = table.columns.get(ColumnKey("value"))
+        if column is not None and column.width != width:
+            column.width = width
+            column.auto_width = False
+            table.refresh_column(table.get_column_index("value"))
+        return width
+
+    def _refresh_detail(self) -> None:
+        """The selected watch value, whole: typed and laid out to the pane's width."""
+        name = self._selected()
+        text = self.state.watch.get(name) if name is not None else None
+        shown: RenderableType
+        if name is None:
+            shown = Text("the watch list is empty: press a to add a variable")
+        elif text is None:
+            shown = Text(f"{name}: waiting for the first value…")
+        elif text.startswith("<"):
+            shown = Text(f"{name}: {text}", style="yellow")
+        else:
+            typed = render_text(name, text)
+            shown = Text(f"{name} = {text}") if isinstance(typed, Text) else typed
+        self.query_one("#watch-detail", DetailPane).show(shown)
+
+    def on_data_table_row_highlighted(self, event: DataTable.RowHighlighted) -> None:
+        self._refresh_detail()
 
     def on_tabbed_content_tab_activated(self, event: TabbedContent.TabActivated) -> None:
+        if event.pane.id == "watch":
+            # ↑/↓ must move the selection that d and e act on, without a Tab first
+            self.query_one("#watch-table", DataTable).focus()
         if self.state.updates:
             self._refresh_view()
 
@@ -229,6 +286,7 @@ class MonitorApp(App[None]):
         )
 
     def _selected(self) -> str | None:
+        """The watch row the table shows selected (its cursor row)."""
         table = self.query_one("#watch-table", DataTable)
         if not self.watchlist.names or table.row_count == 0:
             return None
@@ -236,15 +294,19 @@ class MonitorApp(App[None]):
         return str(row.value) if row.value is not None else None
 
     def action_remove_watch(self) -> None:
-        self.action_tab("watch")
+        if self.query_one(TabbedContent).active != "watch":
+            self.action_tab("watch")  # show the list first: never delete a row unseen
+            return
         name = self._selected()
         if name and self.watchlist.remove(name):
             self.watchlist.save()
             self.query_one("#watch-table", DataTable).remove_row(name)
             self.state.watch.pop(name, None)
+            self.notify(f"removed {name} from the watch list", timeout=2)
+            self._refresh_detail()
 
     def action_edit_watch(self) -> None:
-        self.action_tab("watch")
+        self.action_tab("watch")  # the dialog names the variable it edits
         name = self._selected()
         if name is None:
             self.notify("the watch list is empty: press a to add a variable", severity="warning")
@@ -270,13 +332,27 @@ class MonitorApp(App[None]):
         )
 
     def _write(self, name: str, value: str) -> None:
+        problem = check_literal(value)
+        if problem is not None:
+            self.notify(
+                "\n".join(problem.lines(value)), title="not a KRL literal", severity="error"
+            )
+            return
+
         async def job() -> None:
             try:
-                echo = await self.client.write(name, value)
+                outcome = await checked_write(self.client, name, value, window=self.stop_window)
             except KvpError as exc:
-                self.notify(f"write failed: {exc}", severity="error", timeout=5)
+                self.notify(f"write failed: {exc}", severity="error", timeout=8)
                 return
-            self.notify(f"wrote {name} = {echo}", timeout=3)
+            self.notify(f"wrote {name} = {outcome.echo}", timeout=3)
+            if outcome.stop is not None:
+                self.notify(
+                    outcome.stop.describe(),
+                    title="the robot program stopped right after the write",
+                    severity="error",
+                    timeout=10,
+                )
             self._wake.set()
 
         self.run_worker(job(), group="writes")

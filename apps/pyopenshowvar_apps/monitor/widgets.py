@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 
+from rich.console import RenderableType
 from rich.table import Table
 from rich.text import Text
 from textual.app import ComposeResult
@@ -57,13 +58,31 @@ class Panel(Static):
         self.update(text)
 
 
+class DetailPane(Static):
+    """The selected watch value, whole; ``shown`` keeps the renderable (for tests)."""
+
+    shown: RenderableType = ""
+
+    def show(self, renderable: RenderableType) -> None:
+        self.shown = renderable
+        self.update(renderable)
+
+
 class JointsPanel(Panel):
-    """A1..A6: angle, bar within $SOFTN_END..$SOFTP_END, limits and torque."""
+    """A1..A6: angle, bar within $SOFTN_END..$SOFTP_END, limits and torque.
+
+    The bar takes the width the other columns leave (11 cells at 80 columns, more on a wider
+    terminal).
+    """
+
+    #: Width of the columns besides the bar, with the grid's padding (axis, angle, limits, Nm).
+    OTHER_COLUMNS = 31
 
     def refresh_from(self, state: RobotState) -> None:
         table = Table.grid(padding=(0, 1))
         for _ in range(5):
             table.add_column(justify="right", no_wrap=True)
+        width = max(BAR_WIDTH, min(60, self.content_size.width - self.OTHER_COLUMNS))
         lines = []
         for i, axis in enumerate(AXES):
             lo = state.lower[i] if state.lower else None
@@ -71,7 +90,7 @@ class JointsPanel(Panel):
             angle = state.joints[i]
             limits = f"{fmt(lo, 0)}…{fmt(hi, 0)}"
             torque = f"{fmt(state.torques[i], 1)} Nm"
-            table.add_row(axis, f"{fmt(angle)}°", limit_bar(angle, lo, hi), limits, torque)
+            table.add_row(axis, f"{fmt(angle)}°", limit_bar(angle, lo, hi, width), limits, torque)
             lines.append(f"{axis} {fmt(angle)} {limits} {torque}")
         self.update(table)
         self.plain = "\n".join(lines)
@@ -109,13 +128,19 @@ class PlotsPanel(Widget):
     """Recent history: one sparkline per joint angle and per torque."""
 
     DEFAULT_CSS = """
-    PlotsPanel { height: auto; }
+    PlotsPanel { height: 1fr; }
     PlotsPanel .plot-group { height: auto; }
     PlotsPanel .plot-row { height: 1; }
     PlotsPanel .plot-label { width: 22; }
-    PlotsPanel Sparkline { width: 1fr; height: 1; }
-    PlotsPanel .plot-title { text-style: bold; color: $accent; }
+    PlotsPanel Sparkline { width: 1fr; height: 1fr; }
+    PlotsPanel .plot-title { text-style: bold; color: $accent; height: 1; }
     """
+
+    def on_resize(self) -> None:
+        # Equal, whole-line plot heights that fill the tab: 1 line at 24 rows, 2 at 40.
+        rows = max(1, min(4, (self.size.height - 2) // (2 * len(AXES))))
+        for row in self.query(".plot-row"):
+            row.styles.height = rows
 
     def compose(self) -> ComposeResult:
         for kind, unit in (("joints", "deg"), ("torques", "Nm")):
@@ -143,9 +168,9 @@ class StatsPanel(Widget):
     """Access-time statistics of the monitor's own requests, with a sparkline of the last ones."""
 
     DEFAULT_CSS = """
-    StatsPanel { border: round $primary; padding: 0 1; height: 6; }
+    StatsPanel { border: round $primary; padding: 0 1; height: 1fr; min-height: 6; }
     StatsPanel Static { height: 2; }
-    StatsPanel Sparkline { height: 2; }
+    StatsPanel Sparkline { height: 1fr; min-height: 2; }
     """
 
     plain: str = ""

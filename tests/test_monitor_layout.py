@@ -1,0 +1,146 @@
+"""`kvp monitor` (issue 14): keys act on what is seen selected, values are shown whole, the
+layout fills 80×24 and 120×40, Ctrl-C quits, writes are checked (Textual pilot, real emulator)."""
+
+from __future__ import annotations
+
+import asyncio
+import io
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+pytest.importorskip("textual")
+
+from pyopenshowvar_apps.monitor.app import MonitorApp
+from pyopenshowvar_apps.monitor.dialogs import InputDialog
+from pyopenshowvar_apps.monitor.watchlist import WatchList
+from rich.console import Console
+from textual.widgets import DataTable, Input, TabbedContent
+
+WATCH = ["MYAXIS", "$OV_PRO", "$POS_ACT", "MYINT"]
+
+
+async def until(pilot: Any, cond: Callable[[], bool], timeout: float = 8.0) -> None:
+    loop = asyncio.get_running_loop()
+    end = loop.time() + timeout
+    while not cond():
+        if loop.time() > end:
+            raise AssertionError("condition not met in time")
+        await pilot.pause(0.05)
+
+
+def make_app(port: int, tmp_path: Path) -> MonitorApp:
+    WatchList(tmp_path / "watch.json", WATCH).save()
+    return MonitorApp(
+        "127.0.0.1",
+        port,
+        timeout=1.0,
+        hz=10,
+        watch_file=tmp_path / "watch.json",
+        stop_window=3.0,  # a margin for a loaded machine; the stop ends the watch early
+    )
+
+
+def shown_text(widget: Any) -> str:
+    """What the detail pane shows, rendered at its own width."""
+    console = Console(width=widget.content_size.width, record=True, file=io.StringIO())
+    console.print(widget.shown)
+    return console.export_text()
+
+
+async def test_arrows_select_and_d_deletes_the_row_seen(
+    emulator_factory: Any, tmp_path: Path
+) -> None:
+    emulator = await emulator_factory(robot=False)
+    app = make_app(emulator.port, tmp_path)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await until(pilot, lambda: app.state.updates > 0)
+        await pilot.press("d")  # from the Robot tab: shows the list, deletes nothing
+        assert app.query_one(TabbedContent).active == "watch"
+        assert app.watchlist.names == WATCH
+        table = app.query_one("#watch-table", DataTable)
+        assert app.focused is table  # ↑/↓ work at once, no Tab needed
+        await pilot.press("down", "down")
+        assert table.cursor_row == 2
+        await pilot.press("d")
+        assert app.watchlist.names == ["MYAXIS", "$OV_PRO", "MYINT"]  # $POS_ACT, the row seen
+        await pilot.press("up")
+        await pilot.press("d")
+        assert app.watchlist.names == ["MYAXIS", "MYINT"]
+        await pilot.press("1", "3")  # back to the list: focus follows
+        assert app.focused is table
+
+
+async def test_the_detail_pane_shows_a_struct_whole_at_80x24(
+    emulator_factory: Any, tmp_path: Path
+) -> None:
+    emulator = await emulator_factory(robot=False)
+    emulator.store.set_system("$POS_ACT.X", 412.345612)
+    app = make_app(emulator.port, tmp_path)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("3")
+        await until(pilot, lambda: "$POS_ACT" in app.state.watch)
+        await pilot.press("down", "down")
+        detail = app.query_one("#watch-detail")
+        await until(pilot, lambda: "$POS_ACT (E6POS)" in shown_text(detail))
+        text = shown_text(detail)
+        assert "…" not in text and "412.3456" in text
+        for member in ("X", "Y", "Z", "A", "B", "C", "S", "T", "E1", "E6"):
+            assert f" {member} " in f" {text} ".replace("\n", " "), member
+        assert detail.region.bottom <= app.screen.region.bottom - 1  # above the footer
+
+
+async def test_the_layout_fills_80x24_and_120x40(emulator_factory: Any, tmp_path: Path) -> None:
+    emulator = await emulator_factory(robot=False)
+    app = make_app(emulator.port, tmp_path)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await until(pilot, lambda: app.state.updates > 0)
+        for (width, height), plot_rows in (((80, 24), 1), ((120, 40), 2)):
+            await pilot.resize_terminal(width, height)
+            for tab in ("3", "2", "1"):
+                await pilot.press(tab)
+                await pilot.pause(0.1)
+                assert not app.screen.show_vertical_scrollbar, tab  # nothing below the fold
+                pane = app.query_one(f"#{app.query_one(TabbedContent).active}")
+                assert pane.region.bottom == height - 1 and pane.region.width == width, tab
+                for widget in pane.query("*"):
+                    assert widget.region.right <= width, widget
+                if tab == "2":
+                    assert app.query_one("#joints-A1").region.height == plot_rows
+            joints, stats = app.query_one("#joints"), app.query_one("#stats")
+            assert app.query_one("#right").region.right == width
+            assert stats.region.bottom == height - 1  # the access-time panel takes what is left
+            if width > 80:
+                assert joints.region.width > 46 and stats.region.height > 10
+
+
+async def test_ctrl_c_quits(emulator_factory: Any, tmp_path: Path) -> None:
+    emulator = await emulator_factory(robot=False)
+    app = make_app(emulator.port, tmp_path)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await until(pilot, lambda: app.state.updates > 0)
+        await pilot.press("ctrl+c")
+        await pilot.pause(0.1)
+        assert app.return_code == 0 and not app.is_running
+
+
+async def test_a_write_that_stops_the_program_is_notified(emulator: Any, tmp_path: Path) -> None:
+    app = make_app(emulator.port, tmp_path)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await until(pilot, lambda: app.state.updates > 0)
+        await pilot.press("3", "down", "down", "down", "e")  # MYINT: no confirmation
+        await until(pilot, lambda: isinstance(app.screen, InputDialog))
+        app.screen.query_one(Input).value = "{A1 1O}"
+        await pilot.press("enter")
+        await until(
+            pilot, lambda: any("not a KRL literal" in (n.title or "") for n in app._notifications)
+        )
+        app._write("MYAXIS", "{A1 9999}")  # past the software limit: accepted, then a stop
+        await until(
+            pilot,
+            lambda: any("stopped" in (n.title or "") for n in app._notifications),
+        )
+        note = next(n for n in app._notifications if "stopped" in (n.title or ""))
+        assert "#P_STOP" in note.message and "Software limit switch" in note.message
