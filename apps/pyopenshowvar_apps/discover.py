@@ -160,7 +160,8 @@ def discover(
     from rich.console import Console
     from rich.table import Table
 
-    table = Table(title=f"{len(answers)} proxy(ies) answered ({asked})", title_justify="left")
+    what = "1 proxy" if len(answers) == 1 else f"{len(answers)} proxies"
+    table = Table(title=f"{what} answered ({asked})", title_justify="left")
     for col in ("address", "model", "serial", "ms"):
         table.add_column(col, justify="right" if col == "ms" else "left")
     for a in answers:

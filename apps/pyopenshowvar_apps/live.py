@@ -209,7 +209,9 @@ def record(
         fail(EXIT_USAGE, f"cannot write {out}: {exc.strerror or exc}")
     why = " (interrupted)" if interrupted else ""
     missed = f", {stats['missed']} missed" if stats["missed"] else ""
-    console.print(f"recorded {stats['rows']} rows of {len(names)} variables to {out}{missed}{why}")
+    rows = f"{stats['rows']} row{'' if stats['rows'] == 1 else 's'}"
+    variables = f"{len(names)} variable{'' if len(names) == 1 else 's'}"
+    console.print(f"recorded {rows} of {variables} to {out}{missed}{why}", soft_wrap=True)
 
 
 def _write_row(
