@@ -31,6 +31,7 @@ SCRIPTS = [
     ("Emulator", "emu_throughput.py"),
     ("Kinematics", "kinematics.py"),
     ("Simulated robot CPU", "plant_cpu.py"),
+    ("CLI", "cli_startup.py"),
 ]
 
 

@@ -25,6 +25,7 @@ BENCH = Path(__file__).resolve().parents[1] / "bench"
         ("emu_throughput.py", "requests/s, 10 clients"),
         ("kinematics.py", "Jacobian"),
         ("plant_cpu.py", "dynamic plant, moving"),
+        ("cli_startup.py", "kvp read start-up"),
     ],
 )
 def test_benchmark_runs_quick(script: str, expect: str) -> None:
