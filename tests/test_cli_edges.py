@@ -262,3 +262,22 @@ def test_an_unexpected_error_is_one_line(monkeypatch: Any, capsys: Any) -> None:
     with pytest.raises(RuntimeError):
         cli.main()
     assert sys.exc_info()[0] is None
+
+
+def test_the_case_studies_emulate_the_program_they_need(capsys: Any) -> None:
+    """kvp [--emulate] teleop/haptic [--emulate]: an emulator running EXT_MOVE_AXIS/ACTUATOR."""
+    from pyopenshowvar_apps.casestudies import teleop_cli
+    from pyopenshowvar_apps.casestudies.common import CaseResult
+    from pyopenshowvar_apps.common import Opts
+
+    seen: list[str] = []
+
+    async def probe(kvp: Any) -> CaseResult:
+        seen.append(await kvp.read("$PRO_NAME1[]"))
+        return CaseResult("probe")
+
+    for program in ("actuator", "ext_move_axis"):
+        Opts.reset("127.0.0.1", free_port(), 1.0, emulate=True)  # nothing listens there
+        teleop_cli._run(program, False, probe)
+    assert seen == ['"ACTUATOR"', '"EXT_MOVE_AXIS"']
+    assert "--sim is deprecated" not in capsys.readouterr().err
