@@ -131,7 +131,7 @@ def test_emu_takes_its_own_options() -> None:
 def test_a_value_may_start_with_minus(emulator_thread: Any) -> None:
     port = str(emulator_thread.port)
     for value, stored in (("-5", "-5.00000"), ("-80.5", "-80.5000"), ("-1.5E-3", "-0.00150000")):
-        res = run("--port", port, "write", "MYREAL", value)
+        res = run("--port", port, "write", "MYREAL", value, "--stop-window", "0")
         assert res.exit_code == 0 and res.stdout.strip() == value, res.output
         assert emulator_thread.store.read("MYREAL") == stored
     err = one_clean_error(run("--port", port, "write", "$OV_PRO", "-5"), EXIT_VARIABLE)

@@ -190,7 +190,7 @@ def test_matrix_frame_round_trip_batched() -> None:
 _EXACT = st.sampled_from([-180.0, -90.0, 0.0, 90.0, 180.0])
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=150, deadline=None)
 @given(
     st.one_of(_EXACT, st.floats(-180.0, 180.0)),
     st.one_of(_EXACT, st.floats(-90.0, 90.0)),
@@ -204,7 +204,7 @@ def test_abc_is_in_the_documented_range(a: float, b: float, c: float) -> None:
     assert rotation_angle_deg(matrix_from_abc(ga, gb, gc), r) < 1e-6
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(
     st.lists(
         st.sampled_from([-180.0, -90.0, 0.0, 90.0, 180.0]) | st.floats(-170, 170),

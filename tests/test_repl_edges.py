@@ -69,19 +69,6 @@ def output(child: Any, line: str) -> list[str]:
     return [out for out in text.splitlines() if out.strip() and out.strip() != line]
 
 
-def test_a_pose_fits_80_columns(tmp_path: Path) -> None:
-    with EmulatorThread(STILL) as emu:
-        emu.store.write("MYE6POS", POSE)  # a pose away from HOME: long numbers
-        child = spawn(emu.port, tmp_path)
-        out = command(child, "MYE6POS")
-        child.sendline("q")
-        child.expect(pexpect.EOF)
-    assert "…" not in out
-    for value in ("412.3456", "-123.4568", "712.1235", "-170.1235", "45.6543", "-179.9877", "27"):
-        assert value in out, value
-    assert all(len(line) <= 80 for line in out.splitlines())
-
-
 def test_the_narrow_layout_keeps_every_member() -> None:
     from pyopenshowvar_apps.pretty import render_text
 
@@ -93,36 +80,29 @@ def test_the_narrow_layout_keeps_every_member() -> None:
         assert max(len(line.rstrip()) for line in text.splitlines()) <= width
 
 
-def test_ctrl_c_abandons_a_waiting_read(tmp_path: Path) -> None:
-    with EmulatorThread(STILL) as emu:
-        child = spawn(emu.port, tmp_path, "--timeout", "8")
-        emu.faults.add(Fault("delay", seconds=5.0, count=1))
-        before = emu.stats.requests
-        child.sendline("$OV_PRO")
-        deadline = time.monotonic() + 5
-        while emu.stats.requests == before:  # the read is in flight: the REPL waits for it
-            assert time.monotonic() < deadline
-            time.sleep(0.01)
-        child.sendintr()
-        child.expect_exact("interrupted")
-        child.expect_exact(PROMPT)
-        # still in the REPL, and the next command does not wait behind the abandoned one
-        out = command(child, "$OV_JOG")
-        assert "100" in out and "ms)" in out
-        child.sendline("q")
-        child.expect(pexpect.EOF)
-        child.close()
-    assert child.exitstatus == 0
-
-
-def test_one_lost_connection_one_message(tmp_path: Path) -> None:
+def test_ctrl_c_abandons_a_waiting_read_and_a_lost_connection_is_one_message(
+    tmp_path: Path,
+) -> None:
     first = EmulatorThread(STILL).start()
     port = first.port
-    child = spawn(port, tmp_path)
-    assert "100" in command(child, "$OV_PRO")
+    child = spawn(port, tmp_path, "--timeout", "8")
+    # Ctrl-C while a read waits: back at the prompt, still in the REPL
+    first.faults.add(Fault("delay", seconds=5.0, count=1))
+    before = first.stats.requests
+    child.sendline("$OV_PRO")
+    deadline = time.monotonic() + 5
+    while first.stats.requests == before:  # the read is in flight: the REPL waits for it
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+    child.sendintr()
+    child.expect_exact("interrupted")
+    child.expect_exact(PROMPT)
+    out = output(child, "$OV_JOG")  # does not wait behind the abandoned read
+    assert len(out) == 1 and out[0].startswith("100") and "ms)" in out[0], out
+    # a lost connection: one message, then one line per command while it is away
     first.stop()
     out = output(child, "$OV_PRO")
-    assert len(out) == 1 and "lost" in out[0], out  # ONE message
+    assert len(out) == 1 and "lost" in out[0], out
     out = output(child, "$OV_PRO")
     assert len(out) == 1 and "still not connected" in out[0], out
     with EmulatorThread(replace(STILL, port=port)) as second:
@@ -131,6 +111,8 @@ def test_one_lost_connection_one_message(tmp_path: Path) -> None:
         assert len(out) == 1 and out[0].startswith("42"), out  # back: no further message
         child.sendline("q")
         child.expect(pexpect.EOF)
+        child.close()
+    assert child.exitstatus == 0
 
 
 def test_enter_in_a_ctrl_r_search_runs_the_line(tmp_path: Path) -> None:
@@ -165,9 +147,14 @@ def test_a_piped_script(tmp_path: Path) -> None:
         assert ok.returncode == 0, ok.stdout + ok.stderr
         torque = next(line for line in ok.stdout.splitlines() if line.startswith("334.8"))
         assert len(torque) > 80  # one raw line, not wrapped at 80 columns
-        script = "MYAXIS {A1 1O}\nNOPE\nMYINT 5.5\nMYAXIS {A1 9999}\n$OV_PRO\n"
+        emu.store.write("MYE6POS", POSE)  # a pose away from HOME: long numbers
+        script = "MYE6POS\nMYAXIS {A1 1O}\nNOPE\nMYINT 5.5\nMYAXIS {A1 9999}\n$OV_PRO\n"
         bad = run_script(emu.port, tmp_path, script, "--stop-window", "3")  # margin for load
     out = bad.stdout
+    pose = out[out.index("MYE6POS (E6POS)") : out.index("not a KRL literal")]
+    assert "…" not in pose and all(len(line) <= 80 for line in pose.splitlines())  # 80 columns
+    for value in ("412.3456", "-123.4568", "712.1235", "-170.1235", "45.6543", "-179.9877", "27"):
+        assert value in pose, value
     assert bad.returncode == 2  # the first failure: a literal that is not KRL
     assert "not a KRL literal: unexpected '1O'" in out and "      ^" in out
     assert "unknown variable: 'NOPE'" in out
