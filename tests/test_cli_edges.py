@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+import typer
 from pyopenshowvar_apps import cli
 from pyopenshowvar_apps.cli import (
     EXIT_CONNECTION,
@@ -99,6 +100,8 @@ def test_hoist_global_options() -> None:
     # nothing moves after "--", and a pass-through command keeps everything
     assert hoist_global_options(["write", "--", "X", "--emulate"], own, 0)[-1] == "--emulate"
     assert hoist_global_options(["emu", "--port", "1"], None, 0) == ["emu", "--port", "1"]
+    with pytest.raises(typer.BadParameter):  # a value is missing: say so, do not take "read"
+        hoist_global_options(["read", "X", "-H"], own, 0)
 
 
 def test_global_options_after_the_command(emulator_thread: Any) -> None:

@@ -108,6 +108,8 @@ def hoist_global_options(
             i += 2 if takes_value else 1
         elif key in GLOBAL_VALUED:
             width = 1 if inline else 2
+            if i + width > len(args):
+                raise typer.BadParameter("needs a value", param_hint=f"'{key}'")
             moved += args[i : i + width]
             i += width
         elif key in GLOBAL_FLAGS:
