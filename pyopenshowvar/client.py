@@ -16,111 +16,51 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
+from collections.abc import Iterable, Sequence
 from types import TracebackType
 from typing import Any
 
-from .connection import Connection, IdPolicy
-from .errors import (
-    KrlValueError,
-    KvpConnectionError,
-    KvpError,
-    ReadFailedError,
-    UnknownVariableError,
-    WriteRefusedError,
-)
-from .krl import KrlValue, format_value, parse_value
+from .connection import Connection
+from .core import ClientCore, ReadResult
+from .errors import KvpError, KvpStalledError
+from .krl import KrlValue
 from .protocol import Reply, encode_read, encode_read_array, encode_write, encode_write_array
 from .robot import RobotHelpers
-from .stats import AccessStats
 
 __all__ = ["Client", "ReadResult", "connect"]
 
 log = logging.getLogger(__name__)
 
 
-@dataclass(frozen=True, slots=True)
-class ReadResult:
-    """The outcome for one name of :meth:`Client.read_many`: a value or the error."""
-
-    name: str
-    text: str | None = None
-    value: Any = None
-    error: KvpError | None = None
-
-    @property
-    def ok(self) -> bool:
-        return self.error is None
-
-    def unwrap(self) -> Any:
-        """The typed value if parsed, else the text; raises the stored error."""
-        if self.error is not None:
-            raise self.error
-        return self.value if self.value is not None else self.text
-
-
-class Client(RobotHelpers):
+class Client(RobotHelpers, ClientCore):
     """An asyncio KUKAVARPROXY client. Use ``async with Client(host) as kvp:``.
 
     ``timeout`` is the default for every call (each method takes ``timeout=`` to override).
-    ``auto_reconnect`` opens a new connection on the next call after the old one was lost; calls
-    in flight when it was lost fail (a write is never resent, so it is never applied twice).
-    See :class:`~pyopenshowvar.connection.Connection` for ``max_in_flight``, ``pipeline_bytes``,
-    ``id_policy`` and ``keepalive``.
+    ``auto_reconnect`` opens a new connection on the next call after the old one was lost or
+    found stalled; calls in flight when it was lost fail (a write is never resent, so it is
+    never applied twice). See :class:`~pyopenshowvar.connection.Connection` for
+    ``max_in_flight``, ``pipeline_bytes`` and ``keepalive``, and :mod:`pyopenshowvar.session`
+    for ``id_policy``.
     """
 
-    def __init__(
-        self,
-        host: str = "127.0.0.1",
-        port: int = 7000,
-        *,
-        timeout: float = 2.0,
-        connect_timeout: float | None = None,
-        auto_reconnect: bool = False,
-        keepalive: float | None = 10.0,
-        max_in_flight: int = 64,
-        pipeline_bytes: int = 2048,
-        id_policy: IdPolicy = "auto",
-    ) -> None:
-        self.host = host
-        self.port = port
-        self.timeout = timeout
-        self.connect_timeout = connect_timeout if connect_timeout is not None else max(timeout, 1.0)
-        self.auto_reconnect = auto_reconnect
-        self._conn_kw: dict[str, Any] = {
-            "timeout": timeout,
-            "keepalive": keepalive,
-            "max_in_flight": max_in_flight,
-            "pipeline_bytes": pipeline_bytes,
-            "id_policy": id_policy,
-        }
-        self._conn: Connection | None = None
-        self._stats = AccessStats()
-        self._connect_lock = asyncio.Lock()
-        self.reconnects = 0
+    _conn: Connection | None = None
+    _lock: asyncio.Lock | None = None
 
     # ------------------------------------------------------------------ connection
 
     @property
-    def endpoint(self) -> str:
-        return f"{self.host}:{self.port}"
-
-    @property
     def connected(self) -> bool:
+        """True while the connection is open and healthy (not lost, dropped or stalled)."""
         return self._conn is not None and self._conn.is_open
-
-    @property
-    def stats(self) -> AccessStats:
-        """Access times of every request made through this client (across reconnects)."""
-        return self._stats
 
     @property
     def connection(self) -> Connection | None:
         return self._conn
 
     async def connect(self) -> None:
-        async with self._connect_lock:
+        if self._lock is None:
+            self._lock = asyncio.Lock()
+        async with self._lock:
             if self.connected:
                 return
             was_connected = self._conn is not None
@@ -150,20 +90,40 @@ class Client(RobotHelpers):
         await self.close()
 
     async def _connection(self) -> Connection:
-        if self._conn is not None and self._conn.is_open:
-            return self._conn
-        if self._conn is None or self.auto_reconnect:
+        conn = self._conn
+        if conn is not None and conn.is_open:
+            return conn
+        if conn is None or self.auto_reconnect:
             await self.connect()
             assert self._conn is not None
             return self._conn
-        raise KvpConnectionError(f"connection to {self.endpoint} is closed (auto_reconnect is off)")
+        raise self._closed_error(conn.closed_reason)
+
+    async def _request(self, name: str, frame0: bytes, timeout: float | None) -> Reply:
+        conn = self._conn
+        if conn is None or not conn.is_open:
+            conn = await self._connection()
+        try:
+            return await conn._request(name, frame0, timeout)
+        except KvpStalledError as exc:
+            self._may_retry(exc)  # nothing was sent: safe to send on a new connection
+        return await (await self._connection())._request(name, frame0, timeout)
+
+    async def _request_many(
+        self, items: list[tuple[str, bytes]], timeout: float | None
+    ) -> list[Reply | KvpError]:
+        conn = await self._connection()
+        try:
+            return await conn._request_many(items, timeout)
+        except KvpStalledError as exc:
+            self._may_retry(exc)
+        return await (await self._connection())._request_many(items, timeout)
 
     # ------------------------------------------------------------------ raw access
 
     async def read_reply(self, name: str, *, timeout: float | None = None) -> Reply:
         """The raw :class:`~pyopenshowvar.protocol.Reply` of a read, without interpretation."""
-        conn = await self._connection()
-        return await conn.read(name, timeout=timeout)
+        return await self._request(name, encode_read(0, name), timeout)
 
     async def read(self, name: str, *, timeout: float | None = None) -> str:
         """Read ``name`` and return the proxy's text (JOpenShowVar's ``simpleRead``).
@@ -171,20 +131,7 @@ class Client(RobotHelpers):
         Raises :class:`UnknownVariableError` for KVP's empty-value-with-success answer and
         :class:`ReadFailedError` for a failure status.
         """
-        return self._check_read(name, await self.read_reply(name, timeout=timeout))
-
-    def _check_read(self, name: str, reply: Reply) -> str:
-        if not reply.ok:
-            if reply.mode is None:
-                raise ReadFailedError(
-                    "proxy does not support this request mode", name=name, endpoint=self.endpoint
-                )
-            raise ReadFailedError("read failed", name=name, endpoint=self.endpoint)
-        if not reply.value:
-            raise UnknownVariableError(
-                "unknown or unreadable variable", name=name, endpoint=self.endpoint
-            )
-        return reply.text
+        return self._check_read(name, await self._request(name, encode_read(0, name), timeout))
 
     async def read_value(
         self, name: str, type_name: str | None = None, *, timeout: float | None = None
@@ -194,14 +141,7 @@ class Client(RobotHelpers):
         ``type_name`` ("INT", "E6POS", "REAL[]", ...) coerces and validates; without it the type
         is inferred from the text.
         """
-        text = await self.read(name, timeout=timeout)
-        return self._parse(name, text, type_name)
-
-    def _parse(self, name: str, text: str, type_name: str | None) -> KrlValue:
-        try:
-            return parse_value(text, type_name)
-        except KrlValueError as exc:
-            raise KrlValueError(f"{name!r} on {self.endpoint}: {exc}") from exc
+        return self._parse(name, await self.read(name, timeout=timeout), type_name)
 
     async def write(self, name: str, value: KrlValue | str, *, timeout: float | None = None) -> str:
         """Write ``value`` to ``name`` and return the proxy's echo once it acknowledged.
@@ -211,17 +151,9 @@ class Client(RobotHelpers):
         KRL literal (ints, floats, bools, :class:`KrlEnum`, structs, lists). A failure status
         raises :class:`WriteRefusedError`; the call never returns before the proxy answered.
         """
-        text = value if isinstance(value, str) else format_value(value)
-        conn = await self._connection()
-        reply = await conn.write(name, text, timeout=timeout)
-        if not reply.ok:
-            raise WriteRefusedError(
-                "write refused (read-only, unknown variable or wrong type)",
-                name=name,
-                endpoint=self.endpoint,
-                value=text,
-            )
-        return reply.text
+        text = self._text(value)
+        reply = await self._request(name, encode_write(0, name, text), timeout)
+        return self._check_write(name, text, reply)
 
     async def read_many(
         self,
@@ -237,65 +169,30 @@ class Client(RobotHelpers):
         of the whole batch still raises.
         """
         names = list(names)
-        conn = await self._connection()
-        replies = await conn.request_many([(n, _reader(n)) for n in names], timeout=timeout)
-        out: dict[str, ReadResult] = {}
-        for name, reply in zip(names, replies, strict=True):
-            if isinstance(reply, KvpError):
-                out[name] = ReadResult(name, error=reply)
-                continue
-            try:
-                text = self._check_read(name, reply)
-                value = self._parse(name, text, None) if typed else None
-            except KvpError as exc:
-                out[name] = ReadResult(name, text=reply.text or None, error=exc)
-                continue
-            out[name] = ReadResult(name, text=text, value=value)
-        return out
+        replies = await self._request_many([(n, encode_read(0, n)) for n in names], timeout)
+        return self._read_results(names, replies, typed)
 
     async def write_many(
         self, items: Sequence[tuple[str, KrlValue | str]], *, timeout: float | None = None
     ) -> None:
         """Write several variables pipelined, in order; raises the first failure after all answered."""
-        texts = [(n, v if isinstance(v, str) else format_value(v)) for n, v in items]
-        conn = await self._connection()
-        replies = await conn.request_many([(n, _writer(n, t)) for n, t in texts], timeout=timeout)
-        for (name, text), reply in zip(texts, replies, strict=True):
-            if isinstance(reply, KvpError):
-                raise reply
-            if not reply.ok:
-                raise WriteRefusedError(
-                    "write refused (read-only, unknown variable or wrong type)",
-                    name=name,
-                    endpoint=self.endpoint,
-                    value=text,
-                )
+        texts = [(n, self._text(v)) for n, v in items]
+        frames = [(n, encode_write(0, n, t)) for n, t in texts]
+        self._check_writes(texts, await self._request_many(frames, timeout))
 
     # ------------------------------------------------------------------ PLC array modes
 
     async def read_array_words(self, name: str, *, timeout: float | None = None) -> list[int]:
         """KVP mode 2: the whole array as 16-bit words (KVP packs each value token)."""
-        conn = await self._connection()
-        reply = await conn.request_frame(
-            name, lambda i: encode_read_array(i, name), timeout=timeout
-        )
-        if not reply.ok:
-            what = (
-                "proxy does not support array mode 2" if reply.mode is None else "array read failed"
-            )
-            raise ReadFailedError(what, name=name, endpoint=self.endpoint)
-        return reply.words()
+        reply = await self._request(name, encode_read_array(0, name), timeout)
+        return self._check_array_read(name, reply)
 
     async def write_array_words(
         self, name: str, words: Sequence[int], *, timeout: float | None = None
     ) -> None:
         """KVP mode 3: write ``words`` to NAME[1..k]; the status covers the last element only."""
-        conn = await self._connection()
-        reply = await conn.request_frame(
-            name, lambda i: encode_write_array(i, name, words), timeout=timeout
-        )
-        if not reply.ok:
-            raise WriteRefusedError("array write refused", name=name, endpoint=self.endpoint)
+        reply = await self._request(name, encode_write_array(0, name, words), timeout)
+        self._check_array_write(name, reply)
 
     # ------------------------------------------------------------------ misc
 
@@ -307,17 +204,9 @@ class Client(RobotHelpers):
     async def proxy_type(self) -> str | None:
         """``@PROXY_TYPE`` (C3 Bridge and our emulator answer it; KVP gives None)."""
         try:
-            return await self.read("@PROXY_TYPE")
-        except (UnknownVariableError, ReadFailedError):
-            return None
-
-
-def _reader(name: str) -> Callable[[int], bytes]:
-    return lambda msg_id: encode_read(msg_id, name)
-
-
-def _writer(name: str, text: str) -> Callable[[int], bytes]:
-    return lambda msg_id: encode_write(msg_id, name, text)
+            return self._proxy_type(await self.read("@PROXY_TYPE"))
+        except KvpError as exc:
+            return self._proxy_type(exc)
 
 
 def connect(host: str = "127.0.0.1", port: int = 7000, **kw: Any) -> Client:

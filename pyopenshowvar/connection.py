@@ -1,26 +1,22 @@
-"""One asyncio TCP connection to a KUKAVARPROXY: ids, pipelining, timeouts, keep-alive.
+"""One asyncio TCP connection to a KUKAVARPROXY: sending, timeouts, stalls, keep-alive.
 
-Design choices, each forced by how the real proxy behaves (protocol reference §1.4, §2.5, §2.6):
+The id and matching rules live in :mod:`pyopenshowvar.session` (shared with the blocking
+client); this module adds what is asyncio-specific. Design choices, each forced by how the
+real proxy behaves (protocol reference §1.4, §2.5, §2.6):
 
 * **Each request is one ``transport.write``** with TCP_NODELAY, because KVP does not reassemble
   a request cut across two TCP reads.
-* **Pipelining is bounded** by a request count and by the bytes of unanswered requests: at most
-  ``pipeline_bytes`` (2048, the size of KVP's single ``Read``) and at most one TCP segment of the
-  path (its MSS, read from the socket at connect time). KVP parses every socket read on its own,
-  and a read ends wherever the segments received so far end; while everything unanswered fits
-  in one segment, no segment (and so no read) can end inside a request. A request larger than
-  ``pipeline_bytes`` could never arrive in one read and is refused with :class:`ProtocolError`
-  before anything is sent (raise ``pipeline_bytes`` for servers that reassemble).
-* **Reply matching.** Servers answer in order. A reply is matched by id when the id is pending;
-  requests sent *before* that one and still unanswered were silently dropped by the proxy (its
-  "reading pending" path) and fail at once instead of waiting for their timeout. A reply whose id
-  is not pending while requests are outstanding is the pre-9.0 quirk (every reply of a batch
-  carries the first id): it goes to the oldest outstanding request (FIFO), which is what the
-  server did answer. ``id_policy="strict"`` instead treats such a reply as a protocol error and
-  drops the connection; ``"fifo"`` ignores ids entirely.
+* **Pipelining is bounded** by a request count and by the bytes of unanswered requests
+  (default 2048, the size of KVP's single ``Read``), so a burst can never be cut at the proxy's
+  buffer boundary.
 * **Timeouts never desynchronise.** A timed-out request keeps its place in the queue, marked
   abandoned; its late reply is recognised and discarded.
-* **Connection loss fails every pending call at once** with :class:`KvpConnectionError`.
+* **A stalled server is reported.** When timed-out requests fill the window, the connection is
+  marked unhealthy and closed (:class:`KvpStalledError`); the client reconnects when
+  ``auto_reconnect`` is on.
+* **No failure leaks.** Every future the connection fails is marked retrieved (its caller gets
+  the error through its await; a caller that went away needs no log), each gets its own
+  exception object, and nothing is written to a transport that is closing.
 * **Keep-alive**: after ``keepalive`` seconds without traffic a ``PING`` is sent (KVP 9.0 answers
   ``PONG``); an older proxy answers an empty value, and from then on a cheap read of ``$OV_PRO``
   is used instead, keeping the proxy's 30 s idle timer from closing the connection.
@@ -32,41 +28,28 @@ import asyncio
 import logging
 import socket
 import time
-from collections import deque
 from collections.abc import Callable
-from typing import Literal
 
-from .errors import KvpConnectionError, KvpError, KvpTimeoutError, ProtocolError
-from .protocol import MAX_ID, Reply, ReplyDecoder, encode_read, encode_write
+from .errors import KvpConnectionError, KvpError, KvpStalledError, KvpTimeoutError, ProtocolError
+from .protocol import Reply, ReplyDecoder, encode_read, encode_write
+from .session import IdPolicy, Pending, Session
 from .stats import AccessStats
 
 __all__ = ["Connection", "IdPolicy"]
 
 log = logging.getLogger(__name__)
 
-IdPolicy = Literal["auto", "strict", "fifo"]
 #: Builds a complete request frame for a given message id.
 _Builder = Callable[[int], bytes]
+_Fut = asyncio.Future[Reply]
 
 
-def _segment_size(sock: socket.socket) -> int:
-    """The connection's TCP MSS; 1460 (Ethernet, a KRC's KLI) where the OS does not tell."""
-    try:
-        return max(1, sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_MAXSEG))
-    except (OSError, AttributeError):
-        return 1460
-
-
-class _Pending:
-    __slots__ = ("abandoned", "future", "msg_id", "name", "sent_at", "size")
-
-    def __init__(self, msg_id: int, name: str, size: int, future: asyncio.Future[Reply]) -> None:
-        self.msg_id = msg_id
-        self.name = name
-        self.size = size
-        self.future = future
-        self.sent_at = 0.0
-        self.abandoned = False
+def _fail(future: _Fut, exc: BaseException) -> None:
+    if not future.done():
+        future.set_exception(exc)
+        # The caller awaiting it gets the error; one that went away (cancelled, or an earlier
+        # result of its batch raised) must not make asyncio log "never retrieved".
+        future.exception()
 
 
 class _Protocol(asyncio.Protocol):
@@ -99,25 +82,18 @@ class Connection:
         self.host = host
         self.port = port
         self.timeout = timeout
-        self.max_in_flight = max(1, max_in_flight)
-        self.pipeline_bytes = max(1, pipeline_bytes)
-        self.id_policy = id_policy
         self.keepalive = keepalive
+        self.session: Session[_Fut] = Session(
+            self.endpoint,
+            max_in_flight=max_in_flight,
+            pipeline_bytes=pipeline_bytes,
+            id_policy=id_policy,
+        )
         self.stats = AccessStats()
-        #: Replies whose id was not pending and were given to the oldest request (pre-9.0 quirk).
-        self.mislabeled_replies = 0
-        #: Requests the server never answered (detected when a later reply arrived).
-        self.dropped_requests = 0
         self._transport: asyncio.Transport | None = None
         self._decoder = ReplyDecoder()
-        self._queue: deque[_Pending] = deque()
-        self._by_id: dict[int, _Pending] = {}
-        self._bytes_in_flight = 0
-        #: The unanswered-bytes bound in force: pipeline_bytes, lowered to the path's MSS.
-        self._window = self.pipeline_bytes
-        self._next_id = 0
         self._slot = asyncio.Event()
-        self._closed_exc: Exception | None = None
+        self._closed_reason: str | None = None
         self._last_activity = time.monotonic()
         self._keepalive_task: asyncio.Task[None] | None = None
         self._ping_supported: bool | None = None
@@ -126,17 +102,37 @@ class Connection:
     def endpoint(self) -> str:
         return f"{self.host}:{self.port}"
 
+    @property
+    def id_policy(self) -> IdPolicy:
+        return self.session.id_policy
+
+    @property
+    def mislabeled_replies(self) -> int:
+        """Replies matched in order because they repeated their batch's id (pre-9.0 proxies)."""
+        return self.session.mislabeled_replies
+
+    @property
+    def dropped_requests(self) -> int:
+        """Requests the server never answered (detected when a later reply arrived)."""
+        return self.session.dropped_requests
+
     def use_stats(self, stats: AccessStats) -> None:
         """Record into ``stats`` (the client keeps one object across reconnects)."""
         self.stats = stats
 
     @property
+    def closed_reason(self) -> str | None:
+        """Why the connection was closed, lost or dropped (None while open)."""
+        return self._closed_reason
+
+    @property
     def is_open(self) -> bool:
-        return self._transport is not None and self._closed_exc is None
+        """Connected and healthy: False once lost, closed, dropped or marked stalled."""
+        return self._transport is not None and self._closed_reason is None
 
     @property
     def in_flight(self) -> int:
-        return len(self._queue)
+        return len(self.session.queue)
 
     # ------------------------------------------------------------------ life cycle
 
@@ -166,118 +162,81 @@ class Connection:
         sock = transport.get_extra_info("socket")
         if sock is not None:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            self._window = min(self.pipeline_bytes, _segment_size(sock))
         # No isinstance check on the transport: uvloop's transports are not asyncio.Transport
         # subclasses, and only the interface matters.
         self._transport = transport
         self._last_activity = time.monotonic()
+        if self.session.needs_probe:
+            probe = self.session.register_probe(
+                loop.create_future(), time.perf_counter(), self.timeout
+            )
+            transport.write(probe)
         if self.keepalive:
-            self._keepalive_task = asyncio.get_running_loop().create_task(self._keepalive_loop())
+            self._keepalive_task = loop.create_task(self._keepalive_loop())
         log.debug("connected to %s", self.endpoint)
 
     async def close(self) -> None:
         """Close the socket; pending calls fail with KvpConnectionError."""
-        if self._keepalive_task is not None:
-            self._keepalive_task.cancel()
-            self._keepalive_task = None
-        if self._transport is not None and self._closed_exc is None:
+        self._stop_keepalive()
+        if self._transport is not None and self._closed_reason is None:
             self._transport.close()
-            self._fail_all(KvpConnectionError(f"connection to {self.endpoint} closed"))
+            self._fail_all(f"connection to {self.endpoint} closed")
+        if self._transport is not None:
             # give the transport a chance to really close the socket
             await asyncio.sleep(0)
 
     # ------------------------------------------------------------------ requests
 
     async def read(self, name: str, *, timeout: float | None = None) -> Reply:
-        return await self._request(name, lambda i: encode_read(i, name), timeout)
+        return await self._request(name, encode_read(0, name), timeout)
 
     async def write(self, name: str, value: str, *, timeout: float | None = None) -> Reply:
-        return await self._request(name, lambda i: encode_write(i, name, value), timeout)
+        return await self._request(name, encode_write(0, name, value), timeout)
 
     async def request_frame(
         self, name: str, build: _Builder, *, timeout: float | None = None
     ) -> Reply:
         """Send a frame made by ``build(msg_id)`` (used for modes 2/3 and tests)."""
-        return await self._request(name, build, timeout)
+        return await self._request(name, build(0), timeout)
 
-    def _alloc_id(self) -> int:
-        # Skip ids still pending (abandoned requests keep theirs until answered).
-        for _ in range(MAX_ID + 1):
-            msg_id = self._next_id
-            self._next_id = (self._next_id + 1) & MAX_ID
-            if msg_id not in self._by_id:
-                return msg_id
-        raise ProtocolError("no free message id")  # pragma: no cover - needs 65536 pending
-
-    def _fits(self, size: int) -> bool:
-        if not self._queue:
-            return True  # a lone request always goes, whatever its size
-        return (
-            len(self._queue) < self.max_in_flight and self._bytes_in_flight + size <= self._window
-        )
-
-    def _check_size(self, name: str, frame: bytes) -> None:
-        if len(frame) > self.pipeline_bytes:
-            raise ProtocolError(
-                f"request for {name!r} is {len(frame)} bytes; KUKAVARPROXY reads at most "
-                f"{self.pipeline_bytes} per socket event and would cut it (see pipeline_bytes)"
-            )
-
-    async def _wait_for_room(self, size: int, deadline: float) -> None:
-        while True:
-            self._check_open()
-            if self._fits(size):
-                return
-            self._slot.clear()
-            async with asyncio.timeout_at(deadline):
-                await self._slot.wait()
-
-    def _register(
-        self, name: str, frame0: bytes, loop: asyncio.AbstractEventLoop
-    ) -> tuple[_Pending, bytes]:
-        """Give ``frame0`` (built with id 0) a free id and queue it; returns the final frame."""
-        msg_id = self._alloc_id()
-        # ids are the first two bytes of every frame, so re-stamping is exact and cheap
-        frame = msg_id.to_bytes(2, "big") + frame0[2:]
-        pending = _Pending(msg_id, name, len(frame), loop.create_future())
-        self._queue.append(pending)
-        self._by_id[msg_id] = pending
-        self._bytes_in_flight += pending.size
-        return pending, frame
-
-    def _expire(self, pendings: list[_Pending], timeout: float) -> None:
+    def _expire(self, pendings: list[Pending[_Fut]], timeout: float) -> None:
         for p in pendings:
-            if not p.future.done():
+            if not p.waiter.done():
                 p.abandoned = True
-                p.future.set_exception(
+                _fail(
+                    p.waiter,
                     KvpTimeoutError(
                         f"no reply for {p.name!r} from {self.endpoint} within {timeout:g} s"
-                    )
+                    ),
                 )
 
-    async def _request(self, name: str, build: _Builder, timeout: float | None) -> Reply:
-        if not self._queue and self._closed_exc is None and self._transport is not None:
+    async def _request(self, name: str, frame0: bytes, timeout: float | None) -> Reply:
+        session = self.session
+        transport = self._transport
+        if (
+            not session.queue
+            and self._closed_reason is None
+            and transport is not None
+            and not transport.is_closing()
+        ):
             # Fast path of request_many for one request on an idle connection (the serial
-            # control-loop case): same registration, timer, flush and outcome, less overhead.
+            # control-loop case): same registration, timer, send and outcome, less overhead.
             timeout = self.timeout if timeout is None else timeout
             loop = asyncio.get_running_loop()
-            frame0 = build(0)
-            self._check_size(name, frame0)
-            pending, frame = self._register(name, frame0, loop)
+            pending = session.register(name, frame0, loop.create_future(), timeout)
             pendings = [pending]
             timer = loop.call_at(loop.time() + timeout, self._expire, pendings, timeout)
             try:
                 pending.sent_at = time.perf_counter()
                 self._last_activity = time.monotonic()
-                self._transport.write(frame)
-                return await pending.future
+                transport.write(pending.frame)
+                return await pending.waiter
             except asyncio.CancelledError:
                 pending.abandoned = True
                 raise
             finally:
                 timer.cancel()
-        results = await self.request_many([(name, build)], timeout=timeout)
-        result = results[0]
+        result = (await self._request_many([(name, frame0)], timeout))[0]
         if isinstance(result, BaseException):
             raise result
         return result
@@ -288,37 +247,42 @@ class Connection:
         """Send many requests pipelined and return a reply or an error for each, in order.
 
         Requests are coalesced into as few socket writes as the pipelining bounds allow (every
-        write holds only whole requests). A lost connection fails the whole call; a timeout
-        fails the requests still unanswered at the deadline.
+        write holds only whole requests). A lost connection fails the whole call (after every
+        outcome was collected); a timeout fails the requests still unanswered at the deadline.
         """
+        return await self._request_many([(n, build(0)) for n, build in items], timeout)
+
+    async def _request_many(
+        self, items: list[tuple[str, bytes]], timeout: float | None
+    ) -> list[Reply | KvpError]:
         timeout = self.timeout if timeout is None else timeout
-        frames0 = [(name, build(0)) for name, build in items]
-        for name, frame0 in frames0:  # refuse before anything is sent
-            self._check_size(name, frame0)
         loop = asyncio.get_running_loop()
         deadline = loop.time() + timeout
-        pendings: list[_Pending] = []
-        results: list[Reply | KvpError] = []
-        batch: list[bytes] = []
+        session = self.session
+        if items:
+            self._check_stalled(len(items[0][1]), sent_nothing=True)
+        pendings: list[Pending[_Fut]] = []
+        batch: list[Pending[_Fut]] = []
         timer = loop.call_at(deadline, self._expire, pendings, timeout)
         try:
-            for name, frame0 in frames0:
-                if not self._fits(len(frame0)):
-                    self._flush(batch)
+            for name, frame0 in items:
+                if not session.fits(len(frame0)):
+                    self._send(batch)
                     try:
-                        await self._wait_for_room(len(frame0), deadline)
+                        await self._wait_for_room(len(frame0), deadline, not pendings)
                     except TimeoutError:
                         break
                 else:
                     self._check_open()
-                pending, frame = self._register(name, frame0, loop)
+                pending = session.register(name, frame0, loop.create_future(), timeout)
                 pendings.append(pending)
-                batch.append(frame)
-            self._flush(batch)
-            for p in pendings:
+                batch.append(pending)
+            self._send(batch)
+            results: list[Reply | KvpError] = []
+            for p in pendings:  # every outcome is collected before anything is raised
                 try:
-                    results.append(await p.future)
-                except KvpTimeoutError as exc:
+                    results.append(await p.waiter)
+                except KvpError as exc:
                     results.append(exc)
         except asyncio.CancelledError:
             for p in pendings:
@@ -326,121 +290,116 @@ class Connection:
             raise
         finally:
             timer.cancel()
-        for name, _ in items[len(pendings) :]:
+        sent = len(pendings)
+        pendings.clear()  # a raised error's traceback must not keep the futures alive
+        for result in results:
+            if isinstance(result, KvpConnectionError):
+                raise result
+        for name, _ in items[sent:]:
             results.append(
                 KvpTimeoutError(f"no room to send {name!r} to {self.endpoint} within {timeout:g} s")
             )
         return results
 
-    def _flush(self, batch: list[bytes]) -> None:
+    async def _wait_for_room(self, size: int, deadline: float, sent_nothing: bool) -> None:
+        while True:
+            self._check_open()
+            if self.session.fits(size):
+                return
+            self._check_stalled(size, sent_nothing)
+            self._slot.clear()
+            async with asyncio.timeout_at(deadline):
+                await self._slot.wait()
+
+    def _check_stalled(self, size: int, sent_nothing: bool) -> None:
+        now = time.perf_counter()
+        if self._closed_reason is None and self.session.stalled(size, now):
+            message = self.session.stall_message(now)
+            log.warning("%s", message)
+            if self._transport is not None:
+                self._transport.abort()
+            self._fail_all(message)
+            raise KvpStalledError(message, sent_nothing=sent_nothing)
+
+    def _send(self, batch: list[Pending[_Fut]]) -> None:
         if not batch:
             return
-        assert self._transport is not None
+        transport = self._transport
+        if transport is None or transport.is_closing():
+            # Lost but not yet told (connection_lost runs on the next loop iteration): never
+            # write to a dead transport (asyncio would log "socket.send() raised exception").
+            self._fail_all(f"{self.endpoint} closed the connection")
+            batch.clear()
+            return
         now = time.perf_counter()
-        for p in self._queue:
-            if not p.sent_at:
-                p.sent_at = now
+        for p in batch:
+            p.sent_at = now
         self._last_activity = time.monotonic()
-        self._transport.write(batch[0] if len(batch) == 1 else b"".join(batch))
+        transport.write(batch[0].frame if len(batch) == 1 else b"".join(p.frame for p in batch))
         batch.clear()
 
     def _check_open(self) -> None:
-        if self._closed_exc is not None:
-            raise KvpConnectionError(f"connection to {self.endpoint} is closed: {self._closed_exc}")
+        if self._closed_reason is not None:
+            raise KvpConnectionError(
+                f"connection to {self.endpoint} is closed: {self._closed_reason}"
+            )
         if self._transport is None:
             raise KvpConnectionError(f"not connected to {self.endpoint}")
 
     # ------------------------------------------------------------------ receiving
 
     def _on_data(self, data: bytes) -> None:
+        session = self.session
         try:
             replies = self._decoder.feed_replies(data)
-        except ProtocolError as exc:
-            log.warning("protocol error from %s: %s", self.endpoint, exc)
-            self._abort(exc)
-            return
-        now = time.perf_counter()
-        for reply in replies:
-            self._dispatch(reply, now)
-        self._last_activity = time.monotonic()
-
-    def _dispatch(self, reply: Reply, now: float) -> None:
-        pending = self._by_id.get(reply.msg_id) if self.id_policy != "fifo" else None
-        if pending is not None:
-            # Requests ahead of it were dropped by the server: it never reorders.
-            while self._queue and self._queue[0] is not pending:
-                lost = self._queue[0]
-                self._finish(lost)
-                self.dropped_requests += 1
-                if not lost.future.done():
-                    lost.future.set_exception(
+            now = time.perf_counter()
+            for reply in replies:
+                pending, dropped = session.dispatch(reply)
+                for lost in dropped:
+                    _fail(
+                        lost.waiter,
                         KvpTimeoutError(
                             f"{self.endpoint} never answered the request for {lost.name!r}"
-                        )
+                        ),
                     )
-        elif self._queue:
-            if self.id_policy == "strict":
-                self._abort(ProtocolError(f"reply id {reply.msg_id} matches no request"))
-                return
-            pending = self._queue[0]
-            if self.id_policy == "auto":
-                self.mislabeled_replies += 1
-                if self.mislabeled_replies == 1:
-                    log.warning(
-                        "%s answers with wrong message ids (pre-9.0 proxy?); matching in order",
-                        self.endpoint,
-                    )
-        else:
-            log.debug("discarding unexpected reply id %d from %s", reply.msg_id, self.endpoint)
+                if pending is not None and not pending.waiter.done():
+                    self.stats.record(now - pending.sent_at)
+                    pending.waiter.set_result(reply)
+        except ProtocolError as exc:
+            self._abort(str(exc))
             return
-        self._finish(pending)
-        if pending.abandoned or pending.future.done():
-            return
-        self.stats.record(now - pending.sent_at)
-        pending.future.set_result(reply)
-
-    def _finish(self, pending: _Pending) -> None:
-        if self._queue and self._queue[0] is pending:
-            self._queue.popleft()
-        else:  # pragma: no cover - defensive, the queue head is always the match
-            self._queue.remove(pending)
-        if self._by_id.get(pending.msg_id) is pending:
-            del self._by_id[pending.msg_id]
-        self._bytes_in_flight -= pending.size
+        self._last_activity = time.monotonic()
         self._slot.set()
 
     def _on_lost(self, exc: Exception | None) -> None:
         try:
             self._decoder.eof()
-            reason: Exception = KvpConnectionError(
-                f"{self.endpoint} closed the connection" + (f": {exc}" if exc else "")
-            )
+            reason = f"{self.endpoint} closed the connection" + (f": {exc}" if exc else "")
         except ProtocolError:
-            reason = KvpConnectionError(
-                f"{self.endpoint} closed the connection in the middle of a reply"
-            )
+            reason = f"{self.endpoint} closed the connection in the middle of a reply"
         self._fail_all(reason)
 
-    def _abort(self, exc: Exception) -> None:
+    def _abort(self, problem: str) -> None:
+        log.warning("protocol error from %s: %s; dropping the connection", self.endpoint, problem)
         if self._transport is not None:
             self._transport.abort()
-        self._fail_all(KvpConnectionError(f"connection to {self.endpoint} dropped: {exc}"))
+        self._fail_all(f"connection to {self.endpoint} dropped: protocol error: {problem}")
 
-    def _fail_all(self, exc: Exception) -> None:
-        if self._closed_exc is None:
-            self._closed_exc = exc
-        while self._queue:
-            p = self._queue.popleft()
-            if not p.future.done():
-                p.future.set_exception(exc)
-                # mark retrieved so asyncio does not warn about abandoned futures
-                if p.abandoned:
-                    p.future.exception()
-        self._by_id.clear()
-        self._bytes_in_flight = 0
+    def _fail_all(self, reason: str) -> None:
+        if self._closed_reason is None:
+            self._closed_reason = reason
+        for p in self.session.clear():
+            # one exception object per caller: a shared one would collect every caller's
+            # traceback (and with it their frames and futures) for as long as it lives
+            _fail(p.waiter, KvpConnectionError(reason))
         self._slot.set()
-        if self._keepalive_task is not None and self._keepalive_task is not asyncio.current_task():
-            self._keepalive_task.cancel()
+        self._stop_keepalive()
+
+    def _stop_keepalive(self) -> None:
+        task = self._keepalive_task
+        if task is not None and task is not asyncio.current_task():
+            task.cancel()
+            self._keepalive_task = None
 
     # ------------------------------------------------------------------ keep-alive
 
@@ -449,12 +408,12 @@ class Connection:
         interval = self.keepalive
         while self.is_open:
             idle = time.monotonic() - self._last_activity
-            if idle < interval:
-                await asyncio.sleep(interval - idle)
+            if idle < interval or self.session.queue:
+                await asyncio.sleep(max(interval - idle, interval / 10))
                 continue
             try:
                 await self.ping()
-            except (KvpTimeoutError, KvpConnectionError) as exc:
+            except KvpError as exc:
                 log.info("keep-alive to %s failed: %s", self.endpoint, exc)
                 if not self.is_open:
                     return

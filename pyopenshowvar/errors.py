@@ -5,6 +5,7 @@ the class also derives from it, so generic handlers keep working::
 
     KvpError
     ├── KvpConnectionError (ConnectionError)   cannot connect, connection lost or closed
+    │   └── KvpStalledError                    the server stopped answering; connection closed
     ├── KvpTimeoutError (TimeoutError)         no reply within the call's timeout
     ├── ProtocolError (ValueError)             malformed frame, unexpected reply
     ├── VariableError                          a problem with one named variable
@@ -23,6 +24,7 @@ __all__ = [
     "KrlValueError",
     "KvpConnectionError",
     "KvpError",
+    "KvpStalledError",
     "KvpTimeoutError",
     "ProtocolError",
     "ReadFailedError",
@@ -38,6 +40,19 @@ class KvpError(Exception):
 
 class KvpConnectionError(KvpError, ConnectionError):
     """The TCP connection could not be opened, was lost, or is closed."""
+
+
+class KvpStalledError(KvpConnectionError):
+    """Timed-out requests fill the in-flight window: the server stopped answering.
+
+    The connection was marked unhealthy and closed. ``sent_nothing`` is True when the call that
+    noticed had not sent anything yet, so retrying it on a new connection cannot apply a write
+    twice (the client does that when ``auto_reconnect`` is on).
+    """
+
+    def __init__(self, message: str, *, sent_nothing: bool = False) -> None:
+        super().__init__(message)
+        self.sent_nothing = sent_nothing
 
 
 class KvpTimeoutError(KvpError, TimeoutError):

@@ -1,6 +1,7 @@
 """Robot-level helpers on top of raw reads and writes (JOpenShowVar parity, then better).
 
-Mixed into :class:`~pyopenshowvar.client.Client`:
+Written once as operations (:mod:`pyopenshowvar.core`) and mixed into both clients, the
+asyncio :class:`~pyopenshowvar.client.Client` and the blocking :class:`pyopenshowvar.sync.Client`:
 
 * ``read_joint_angles()`` / ``read_joint_torques()`` / ``read_pose()`` — numpy arrays and typed
   poses. Torques come from ONE read of ``$TORQUE_AXIS_ACT[]`` (JOpenShowVar makes six round
@@ -14,23 +15,20 @@ Mixed into :class:`~pyopenshowvar.client.Client`:
 
 from __future__ import annotations
 
-import asyncio
 import logging
 import time
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
+from .core import Call, Op, as_async_method, as_sync_method
 from .errors import KrlValueError, KvpTimeoutError, UnknownVariableError
 from .krl import E6Axis, E6Pos, KrlValue, Struct, parse_array, parse_value
 
-if TYPE_CHECKING:
-    from .client import ReadResult
-
-__all__ = ["PathHandshake", "RobotHelpers"]
+__all__ = ["PathHandshake", "RobotHelpers", "SyncRobotHelpers"]
 
 log = logging.getLogger(__name__)
 
@@ -55,180 +53,191 @@ class PathHandshake:
     index: str = "PATH_INDEX"  # INT: point being executed (progress)
 
 
+# --------------------------------------------------------------------------- operations
+# Each helper is written once, as an operation (see pyopenshowvar.core): it yields the calls it
+# needs and gets their results back. The asyncio and the blocking client both run it.
+
+
+def _read(name: str, timeout: float | None) -> Call:
+    return ("read", (name,), {"timeout": timeout})
+
+
+def _write(name: str, value: KrlValue | str, timeout: float | None) -> Call:
+    return ("write", (name, value), {"timeout": timeout})
+
+
+def read_joint_angles(io: Any, *, timeout: float | None = None) -> Op[FloatArray]:
+    """A1..A6 of ``$AXIS_ACT`` in degrees, as a numpy array of shape (6,)."""
+    axis = parse_value((yield _read("$AXIS_ACT", timeout)), "E6AXIS")
+    assert isinstance(axis, Struct)
+    return _members_array(axis, _AXES, "$AXIS_ACT", io.endpoint)
+
+
+def read_pose(io: Any, *, timeout: float | None = None) -> Op[E6Pos]:
+    """``$POS_ACT`` (TCP of ``$TOOL`` in ``$BASE``) as an :class:`E6Pos`; ``.to_numpy()`` gives X..C."""
+    value = parse_value((yield _read("$POS_ACT", timeout)), "E6POS")
+    assert isinstance(value, E6Pos)
+    return value
+
+
+def read_joint_torques(io: Any, *, timeout: float | None = None) -> Op[FloatArray]:
+    """Torques of A1..A6 in Nm from ``$TORQUE_AXIS_ACT``, shape (6,).
+
+    One read of the whole array when the proxy supports it, otherwise six pipelined element
+    reads (still one round-trip time, not six). The choice is remembered per client.
+    """
+    if io._torque_whole_array is not False:
+        try:
+            values = parse_array((yield _read("$TORQUE_AXIS_ACT[]", timeout)), "REAL")
+            if len(values) >= 6:
+                io._torque_whole_array = True
+                return np.asarray(values[:6], dtype=np.float64)
+        except (UnknownVariableError, KrlValueError):
+            pass
+        log.info("%s cannot read $TORQUE_AXIS_ACT[] whole; using element reads", io.endpoint)
+        io._torque_whole_array = False
+    names = [f"$TORQUE_AXIS_ACT[{i}]" for i in range(1, 7)]
+    results = yield ("read_many", (names,), {"timeout": timeout})
+    return np.asarray([_real(parse_value(results[n].unwrap(), "REAL")) for n in names])
+
+
+def write_joint_path(
+    io: Any,
+    points: Iterable[Sequence[float] | E6Axis],
+    *,
+    array: str = "MYE6ARRAY",
+    capacity: int = 512,
+    handshake: PathHandshake | None = PathHandshake(),
+    start: bool = True,
+    timeout: float | None = None,
+) -> Op[int]:
+    """Write a joint-space path (degrees) into ``array[1..n]`` and start it.
+
+    Each point is written as ``{A1 .., ..., A6 ..}`` (external axes keep their values),
+    pipelined. Then the handshake's count is set and, if ``start``, its start flag. Returns n.
+    """
+    values = [p if isinstance(p, Struct) else _partial(_AXES, p) for p in points]
+    return (yield from _write_path(io, values, array, capacity, handshake, start, timeout))
+
+
+def write_cartesian_path(
+    io: Any,
+    points: Iterable[Sequence[float] | Struct],
+    *,
+    array: str = "MYPOSARRAY",
+    capacity: int = 512,
+    handshake: PathHandshake | None = PathHandshake(),
+    start: bool = True,
+    timeout: float | None = None,
+) -> Op[int]:
+    """Write a Cartesian path (X Y Z in mm, A B C in degrees) into a POS array and start it.
+
+    Plain 6-sequences are written as ``{X .., Y .., Z .., A .., B .., C ..}`` so S and T keep
+    the values in the array (KRL partial-aggregate semantics); pass :class:`Pos` objects to
+    set S and T explicitly.
+    """
+    values = [p if isinstance(p, Struct) else _partial(_CART, p) for p in points]
+    return (yield from _write_path(io, values, array, capacity, handshake, start, timeout))
+
+
+def _write_path(
+    io: Any,
+    values: list[Struct],
+    array: str,
+    capacity: int,
+    handshake: PathHandshake | None,
+    start: bool,
+    timeout: float | None,
+) -> Op[int]:
+    if not values:
+        raise ValueError("a path needs at least one point")
+    if len(values) > capacity:
+        raise ValueError(f"path of {len(values)} points exceeds the array capacity {capacity}")
+    if handshake is not None:
+        # Never overwrite points the robot is still executing.
+        if _bool((yield _read(handshake.busy, timeout))):
+            raise RuntimeError(
+                f"{handshake.busy} is TRUE on {io.endpoint}: a path is still running"
+            )
+        yield _write(handshake.start, False, timeout)
+        yield _write(handshake.done, False, timeout)
+    items = [(f"{array}[{i}]", v) for i, v in enumerate(values, 1)]
+    yield ("write_many", (items,), {"timeout": timeout})
+    if handshake is not None:
+        yield _write(handshake.count, len(values), timeout)
+        if start:
+            yield _write(handshake.start, True, timeout)
+    return len(values)
+
+
+def wait_path_done(
+    io: Any,
+    handshake: PathHandshake = PathHandshake(),
+    *,
+    poll: float = 0.024,
+    timeout: float = 60.0,
+) -> Op[float]:
+    """Poll until the program reports the path finished; returns the seconds waited."""
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        if _bool((yield _read(handshake.done, None))):
+            return time.monotonic() - t0
+        yield ("sleep", (poll,), {})
+    raise KvpTimeoutError(
+        f"path on {io.endpoint} not done after {timeout:g} s ({handshake.done} still FALSE)"
+    )
+
+
+def set_output(
+    io: Any, index: int, value: bool, *, array: str = "OUTPUT_VARS", timeout: float | None = None
+) -> Op[None]:
+    """Set binary output ``index`` through the global BOOL array the SPS copies to ``$OUT``."""
+    yield _write(f"{array}[{index}]", bool(value), timeout)
+
+
+def set_outputs(
+    io: Any,
+    values: Mapping[int, bool],
+    *,
+    array: str = "OUTPUT_VARS",
+    timeout: float | None = None,
+) -> Op[None]:
+    """Set several outputs in one pipelined burst."""
+    items = [(f"{array}[{i}]", bool(v)) for i, v in values.items()]
+    yield ("write_many", (items,), {"timeout": timeout})
+
+
+def read_output(io: Any, index: int, *, timeout: float | None = None) -> Op[bool]:
+    """The real output ``$OUT[index]`` (readable, though not writable over KVP)."""
+    return _bool((yield _read(f"$OUT[{index}]", timeout)))
+
+
 class RobotHelpers:
-    """Helpers that need only read/write/read_many; mixed into the Client."""
+    """The robot helpers as coroutine methods; mixed into the asyncio Client."""
 
-    _torque_whole_array: bool | None = None
+    read_joint_angles = as_async_method(read_joint_angles)
+    read_pose = as_async_method(read_pose)
+    read_joint_torques = as_async_method(read_joint_torques)
+    write_joint_path = as_async_method(write_joint_path)
+    write_cartesian_path = as_async_method(write_cartesian_path)
+    wait_path_done = as_async_method(wait_path_done)
+    set_output = as_async_method(set_output)
+    set_outputs = as_async_method(set_outputs)
+    read_output = as_async_method(read_output)
 
-    @property
-    def endpoint(self) -> str:
-        raise NotImplementedError
 
-    # The client implements these; declared here so the helpers type-check on their own.
-    async def read(self, name: str, *, timeout: float | None = None) -> str:
-        raise NotImplementedError
+class SyncRobotHelpers:
+    """The same helpers as blocking methods; mixed into :class:`pyopenshowvar.sync.Client`."""
 
-    async def write(self, name: str, value: KrlValue | str, *, timeout: float | None = None) -> str:
-        raise NotImplementedError
-
-    async def read_many(
-        self, names: Iterable[str], *, typed: bool = False, timeout: float | None = None
-    ) -> dict[str, ReadResult]:
-        raise NotImplementedError
-
-    async def write_many(
-        self, items: Sequence[tuple[str, KrlValue | str]], *, timeout: float | None = None
-    ) -> None:
-        raise NotImplementedError
-
-    async def read_joint_angles(self, *, timeout: float | None = None) -> FloatArray:
-        """A1..A6 of ``$AXIS_ACT`` in degrees, as a numpy array of shape (6,)."""
-        text = await self.read("$AXIS_ACT", timeout=timeout)
-        axis = parse_value(text, "E6AXIS")
-        assert isinstance(axis, Struct)
-        return _members_array(axis, _AXES, "$AXIS_ACT", self.endpoint)
-
-    async def read_pose(self, *, timeout: float | None = None) -> E6Pos:
-        """``$POS_ACT`` (TCP of ``$TOOL`` in ``$BASE``) as an :class:`E6Pos`; ``.to_numpy()`` gives X..C."""
-        value = parse_value(await self.read("$POS_ACT", timeout=timeout), "E6POS")
-        assert isinstance(value, E6Pos)
-        return value
-
-    async def read_joint_torques(self, *, timeout: float | None = None) -> FloatArray:
-        """Torques of A1..A6 in Nm from ``$TORQUE_AXIS_ACT``, shape (6,).
-
-        One read of the whole array when the proxy supports it, otherwise six pipelined element
-        reads (still one round-trip time, not six). The choice is remembered per client.
-        """
-        io = self
-        if self._torque_whole_array is not False:
-            try:
-                values = parse_array(await io.read("$TORQUE_AXIS_ACT[]", timeout=timeout), "REAL")
-                if len(values) >= 6:
-                    self._torque_whole_array = True
-                    return np.asarray(values[:6], dtype=np.float64)
-            except (UnknownVariableError, KrlValueError):
-                pass
-            log.info("%s cannot read $TORQUE_AXIS_ACT[] whole; using element reads", io.endpoint)
-            self._torque_whole_array = False
-        names = [f"$TORQUE_AXIS_ACT[{i}]" for i in range(1, 7)]
-        results = await io.read_many(names, timeout=timeout)
-        return np.asarray([_real(parse_value(results[n].unwrap(), "REAL")) for n in names])
-
-    # ------------------------------------------------------------------ paths
-
-    async def write_joint_path(
-        self,
-        points: Iterable[Sequence[float] | E6Axis],
-        *,
-        array: str = "MYE6ARRAY",
-        capacity: int = 512,
-        handshake: PathHandshake | None = PathHandshake(),
-        start: bool = True,
-        timeout: float | None = None,
-    ) -> int:
-        """Write a joint-space path (degrees) into ``array[1..n]`` and start it.
-
-        Each point is written as ``{A1 .., ..., A6 ..}`` (external axes keep their values),
-        pipelined. Then the handshake's count is set and, if ``start``, its start flag. Returns n.
-        """
-        values = [p if isinstance(p, Struct) else _partial(_AXES, p) for p in points]
-        return await self._write_path(values, array, capacity, handshake, start, timeout)
-
-    async def write_cartesian_path(
-        self,
-        points: Iterable[Sequence[float] | Struct],
-        *,
-        array: str = "MYPOSARRAY",
-        capacity: int = 512,
-        handshake: PathHandshake | None = PathHandshake(),
-        start: bool = True,
-        timeout: float | None = None,
-    ) -> int:
-        """Write a Cartesian path (X Y Z in mm, A B C in degrees) into a POS array and start it.
-
-        Plain 6-sequences are written as ``{X .., Y .., Z .., A .., B .., C ..}`` so S and T keep
-        the values in the array (KRL partial-aggregate semantics); pass :class:`Pos` objects to
-        set S and T explicitly.
-        """
-        values = [p if isinstance(p, Struct) else _partial(_CART, p) for p in points]
-        return await self._write_path(values, array, capacity, handshake, start, timeout)
-
-    async def _write_path(
-        self,
-        values: list[Struct],
-        array: str,
-        capacity: int,
-        handshake: PathHandshake | None,
-        start: bool,
-        timeout: float | None,
-    ) -> int:
-        io = self
-        if not values:
-            raise ValueError("a path needs at least one point")
-        if len(values) > capacity:
-            raise ValueError(f"path of {len(values)} points exceeds the array capacity {capacity}")
-        if handshake is not None:
-            # Never overwrite points the robot is still executing.
-            if await _read_bool(io, handshake.busy, timeout):
-                raise RuntimeError(
-                    f"{handshake.busy} is TRUE on {io.endpoint}: a path is still running"
-                )
-            await io.write(handshake.start, False, timeout=timeout)
-            await io.write(handshake.done, False, timeout=timeout)
-        await io.write_many(
-            [(f"{array}[{i}]", v) for i, v in enumerate(values, 1)], timeout=timeout
-        )
-        if handshake is not None:
-            await io.write(handshake.count, len(values), timeout=timeout)
-            if start:
-                await io.write(handshake.start, True, timeout=timeout)
-        return len(values)
-
-    async def wait_path_done(
-        self,
-        handshake: PathHandshake = PathHandshake(),
-        *,
-        poll: float = 0.024,
-        timeout: float = 60.0,
-    ) -> float:
-        """Poll until the program reports the path finished; returns the seconds waited."""
-        io = self
-        t0 = time.monotonic()
-        while time.monotonic() - t0 < timeout:
-            if await _read_bool(io, handshake.done, None):
-                return time.monotonic() - t0
-            await asyncio.sleep(poll)
-        raise KvpTimeoutError(
-            f"path on {io.endpoint} not done after {timeout:g} s ({handshake.done} still FALSE)"
-        )
-
-    # ------------------------------------------------------------------ outputs
-
-    async def set_output(
-        self, index: int, value: bool, *, array: str = "OUTPUT_VARS", timeout: float | None = None
-    ) -> None:
-        """Set binary output ``index`` through the global BOOL array the SPS copies to ``$OUT``."""
-        io = self
-        await io.write(f"{array}[{index}]", bool(value), timeout=timeout)
-
-    async def set_outputs(
-        self,
-        values: Mapping[int, bool],
-        *,
-        array: str = "OUTPUT_VARS",
-        timeout: float | None = None,
-    ) -> None:
-        """Set several outputs in one pipelined burst."""
-        io = self
-        await io.write_many(
-            [(f"{array}[{i}]", bool(v)) for i, v in values.items()], timeout=timeout
-        )
-
-    async def read_output(self, index: int, *, timeout: float | None = None) -> bool:
-        """The real output ``$OUT[index]`` (readable, though not writable over KVP)."""
-        io = self
-        return await _read_bool(io, f"$OUT[{index}]", timeout)
+    read_joint_angles = as_sync_method(read_joint_angles)
+    read_pose = as_sync_method(read_pose)
+    read_joint_torques = as_sync_method(read_joint_torques)
+    write_joint_path = as_sync_method(write_joint_path)
+    write_cartesian_path = as_sync_method(write_cartesian_path)
+    wait_path_done = as_sync_method(wait_path_done)
+    set_output = as_sync_method(set_output)
+    set_outputs = as_sync_method(set_outputs)
+    read_output = as_sync_method(read_output)
 
 
 def _real(value: KrlValue) -> float:
@@ -237,9 +246,8 @@ def _real(value: KrlValue) -> float:
     return float(value)
 
 
-async def _read_bool(io: RobotHelpers, name: str, timeout: float | None) -> bool:
-    value = parse_value(await io.read(name, timeout=timeout), "BOOL")
-    return bool(value)
+def _bool(text: str) -> bool:
+    return bool(parse_value(text, "BOOL"))
 
 
 def _partial(keys: Sequence[str], point: Sequence[float] | Any) -> Struct:

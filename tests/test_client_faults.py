@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import asyncio
 import time
-from collections.abc import AsyncIterator, Awaitable, Callable
-from contextlib import asynccontextmanager
 
 import pytest
 
@@ -21,56 +19,25 @@ from pyopenshowvar import (
     UnknownVariableError,
     WriteRefusedError,
 )
-from pyopenshowvar.protocol import Mode, Reply, Request, RequestDecoder, encode_reply
-
-# A handler gets each decoded request and the writer; it decides what (if anything) to send.
-Handler = Callable[[Request, asyncio.StreamWriter, int], Awaitable[None]]
+from pyopenshowvar.protocol import Mode, Reply, Request, encode_reply
+from pyopenshowvar.testing import FakeProxy, Handler, answer
 
 
-def answer(req: Request, value: bytes | None = None, status: int = 1) -> bytes:
-    """A correct KVP 9.0 reply: reads answer NAME-derived text, writes echo."""
-    if value is None:
-        value = req.value if req.mode == Mode.WRITE else f"v:{req.name}".encode()
-    assert value is not None
-    return encode_reply(Reply(req.msg_id, req.mode, value, status))
-
-
-@asynccontextmanager
-async def broken_server(handler: Handler) -> AsyncIterator[int]:
-    counter = 0
-
-    async def serve(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        nonlocal counter
-        dec = RequestDecoder()
-        try:
-            while data := await reader.read(65536):
-                for req in dec.feed_requests(data):
-                    counter += 1
-                    await handler(req, writer, counter)
-        except (ConnectionError, asyncio.CancelledError):
-            pass
-        finally:
-            writer.close()
-
-    server = await asyncio.start_server(serve, "127.0.0.1", 0)
-    port = server.sockets[0].getsockname()[1]
-    try:
-        yield port
-    finally:
-        server.close()
+def broken_server(handler: Handler) -> FakeProxy:
+    return FakeProxy(handler)
 
 
 async def test_dropped_reply_times_out_and_connection_stays_usable() -> None:
     async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
-        if n != 1:  # the first request is never answered
+        if req.name != "$OV_RO":  # never answered
             w.write(answer(req))
 
     async with broken_server(handler) as port, Client(port=port, timeout=0.3) as kvp:
         t0 = time.monotonic()
         with pytest.raises(KvpTimeoutError) as info:
-            await kvp.read("$OV_PRO")
+            await kvp.read("$OV_RO")
         assert 0.25 < time.monotonic() - t0 < 1.5
-        assert "$OV_PRO" in str(info.value) and str(port) in str(info.value)
+        assert "$OV_RO" in str(info.value) and str(port) in str(info.value)
         assert isinstance(info.value, TimeoutError)
         assert await kvp.read("$AXIS_ACT") == "v:$AXIS_ACT"
 
@@ -79,7 +46,7 @@ async def test_dropped_reply_is_detected_when_the_next_reply_arrives() -> None:
     # The server silently skips request 1 of a pipelined pair; the client must not hand
     # request 2's reply to request 1 and must fail request 1 without waiting for its timeout.
     async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
-        if n == 1:
+        if req.name == "A":
             return
         await asyncio.sleep(0.01)
         w.write(answer(req))
@@ -95,7 +62,7 @@ async def test_dropped_reply_is_detected_when_the_next_reply_arrives() -> None:
 
 async def test_late_reply_after_timeout_is_discarded() -> None:
     async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
-        if n == 1:
+        if req.name == "SLOW":
             await asyncio.sleep(0.4)  # stall: answer arrives after the client gave up
         w.write(answer(req))
 
@@ -121,7 +88,7 @@ async def test_split_frames_are_reassembled() -> None:
 
 async def test_close_mid_frame_fails_every_pending_call_at_once() -> None:
     async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
-        if n == 3:
+        if req.name == "V2":
             w.write(answer(req)[:5])
             await w.drain()
             w.close()
@@ -140,7 +107,7 @@ async def test_close_mid_frame_fails_every_pending_call_at_once() -> None:
 
 async def test_auto_reconnect_after_drop() -> None:
     async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
-        if n == 1:
+        if req.name == "MYINT":
             w.close()
             return
         w.write(answer(req))
@@ -153,28 +120,24 @@ async def test_auto_reconnect_after_drop() -> None:
 
 
 async def test_legacy_proxy_ids_matched_in_order() -> None:
-    # Pre-9.0 KVP: every reply of a batch carries the first request's id.
-    batch: list[Request] = []
+    # Pre-9.0 KVP: every reply to one socket read carries the id of that read's first request.
+    async def on_read(reqs: list[Request], w: asyncio.StreamWriter) -> None:
+        await asyncio.sleep(0.005)  # let a batch pile up
+        first = reqs[0].msg_id
+        w.write(b"".join(encode_reply(Reply(first, r.mode, f"v:{r.name}".encode())) for r in reqs))
 
-    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
-        batch.append(req)
-        if len(batch) == 4:
-            first = batch[0].msg_id
-            for r in batch:
-                w.write(encode_reply(Reply(first, r.mode, f"v:{r.name}".encode())))
-            batch.clear()
+    async with FakeProxy(on_read=on_read) as port, Client(port=port) as kvp:
+        names = [f"N{i}" for i in range(40)]
+        results = await kvp.read_many(names)
+        assert [r.text for r in results.values()] == [f"v:{n}" for n in names]
+        assert kvp.connection is not None and kvp.connection.session.ids == "legacy"
+        assert kvp.connection.mislabeled_replies >= 1
 
-    async with broken_server(handler) as port, Client(port=port) as kvp:
-        results = await asyncio.gather(*(kvp.read(f"N{i}") for i in range(4)))
-        assert results == ["v:N0", "v:N1", "v:N2", "v:N3"]
-        assert kvp.connection is not None and kvp.connection.mislabeled_replies == 3
-
-    async with broken_server(handler) as port, Client(port=port, id_policy="strict") as kvp:
-        results = await asyncio.gather(
-            *(kvp.read(f"N{i}") for i in range(4)), return_exceptions=True
-        )
-        assert results[0] == "v:N0"
-        assert all(isinstance(r, KvpConnectionError) for r in results[1:])
+    # declared ids echoed: the first repeated id is a protocol error, never a value
+    async with FakeProxy(on_read=on_read) as port, Client(port=port, id_policy="strict") as kvp:
+        with pytest.raises(KvpConnectionError, match="repeats the previous reply's id"):
+            await kvp.read_many(["N0", "N1", "N2", "N3"])
+        assert not kvp.connected
 
 
 async def test_status_and_empty_value_outcomes() -> None:
@@ -204,7 +167,7 @@ async def test_status_and_empty_value_outcomes() -> None:
 
 async def test_unknown_mode_four_byte_reply() -> None:
     async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
-        w.write(encode_reply(Reply(req.msg_id, None)))
+        w.write(encode_reply(Reply(req.msg_id, None)) if req.mode > 1 else answer(req))
 
     async with broken_server(handler) as port, Client(port=port) as kvp:
         with pytest.raises(ReadFailedError, match="mode"):
@@ -248,7 +211,7 @@ async def test_id_wrap_and_skip_pending_ids() -> None:
     async with broken_server(handler) as port, Client(port=port) as kvp:
         conn = kvp.connection
         assert conn is not None
-        conn._next_id = 65534
+        conn.session._next_id = 65534
         ids = [int(await kvp.read("ID")) for _ in range(4)]
         assert ids == [65534, 65535, 0, 1]
 
@@ -264,7 +227,8 @@ async def test_keepalive_falls_back_to_a_cheap_read_on_old_proxies() -> None:
     async with broken_server(handler) as port, Client(port=port, keepalive=0.05) as kvp:
         await asyncio.sleep(0.4)
         assert kvp.connected
-    assert seen[0] == "PING" and "$OV_PRO" in seen and seen.count("PING") == 1
+    # (the first two reads are the message-id probe)
+    assert seen[2] == "PING" and "$OV_PRO" in seen[3:] and seen.count("PING") == 1
 
 
 async def test_pipelining_never_exceeds_the_proxy_read_buffer() -> None:
@@ -272,24 +236,15 @@ async def test_pipelining_never_exceeds_the_proxy_read_buffer() -> None:
     # The client bounds unanswered bytes, so no single server read can exceed 2048 bytes.
     sizes: list[int] = []
 
-    async def serve(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        dec = RequestDecoder()
-        while data := await reader.read(65536):
-            sizes.append(len(data))
-            await asyncio.sleep(0.002)  # a slow proxy lets requests pile up
-            for req in dec.feed_requests(data):
-                writer.write(answer(req))
-        writer.close()
+    async def on_read(reqs: list[Request], writer: asyncio.StreamWriter) -> None:
+        sizes.append(sum(len(r.encode()) for r in reqs))
+        await asyncio.sleep(0.002)  # a slow proxy lets requests pile up
+        writer.write(b"".join(answer(r) for r in reqs))
 
-    server = await asyncio.start_server(serve, "127.0.0.1", 0)
-    port = server.sockets[0].getsockname()[1]
-    try:
-        async with Client(port=port) as kvp:
-            names = [f"MYE6ARRAY[{i}]" for i in range(1, 401)]
-            res = await kvp.read_many(names)
-            assert [r.text for r in res.values()] == [f"v:{n}" for n in names]
-    finally:
-        server.close()
+    async with FakeProxy(on_read=on_read) as port, Client(port=port, id_policy="strict") as kvp:
+        names = [f"MYE6ARRAY[{i}]" for i in range(1, 401)]
+        res = await kvp.read_many(names)
+        assert [r.text for r in res.values()] == [f"v:{n}" for n in names]
     assert max(sizes) <= 2048
     assert len(sizes) < 400  # requests were coalesced, not sent one segment each
 
@@ -302,6 +257,8 @@ async def test_torques_fall_back_to_pipelined_element_reads() -> None:
         seen.append(req.name)
         if req.name.endswith("[]"):
             w.write(answer(req, b""))
+        elif req.name == "$OV_PRO":  # the message-id probe before the first pipelined batch
+            w.write(answer(req, b"100"))
         else:
             idx = int(req.name.split("[")[1].rstrip("]"))
             w.write(answer(req, f"{-1.5 * idx}".encode()))
@@ -311,7 +268,7 @@ async def test_torques_fall_back_to_pipelined_element_reads() -> None:
         assert list(tau) == [-1.5, -3.0, -4.5, -6.0, -7.5, -9.0]
         tau = await kvp.read_joint_torques()  # the fallback is remembered: no second [] read
     assert seen.count("$TORQUE_AXIS_ACT[]") == 1
-    assert len(seen) == 13
+    assert len(seen) == 13 + 2  # the two reads of the id probe (once per connection)
 
 
 async def test_garbage_reply_drops_the_connection_with_a_protocol_message() -> None:

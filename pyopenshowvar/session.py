@@ -1,0 +1,304 @@
+"""Sans-IO bookkeeping of one client connection: message ids, the in-flight window, and the
+rules that match a reply to its request. Shared by the asyncio connection and the blocking
+client, so both give the same guarantees; no sockets and no asyncio here.
+
+The guarantee is that a reply is never handed to a request it does not answer:
+
+* **By id** whenever the proxy echoes ids (KVP 9.0, C3 Bridge, our emulator). A reply is given
+  to the pending request with its id; requests sent *before* that one and still unanswered were
+  dropped by the proxy (servers never reorder) and fail at once. A reply whose id nobody is
+  waiting for — an unsolicited or duplicated reply, a reply for a request already failed as
+  dropped, a reply on an idle connection — is a protocol error: the connection is dropped and
+  every pending call fails loudly. It is never taken as a value.
+* **In order** only for a proxy *proven* to have the pre-9.0 id bug (every reply to one socket
+  read carries the id of the first request of that read). Under ``id_policy="auto"`` the proof
+  is a probe sent the first time two requests would be in flight: two reads in one segment on
+  an idle connection. Both answered with their own ids: the proxy echoes ids, and by-id matching
+  stays. The second answered with the first's id: the bug is proven. Even then only a reply
+  that repeats the id of the reply just before it (the batch's label) is matched to the oldest
+  request, and what can be checked is checked: the reply's mode against the request's, a write's
+  echo against the value sent, and a read's value shape against what that variable read before.
+* ``id_policy="strict"`` declares ids echoed without a probe; ``"legacy"`` declares the bug.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from typing import Generic, Literal, TypeVar
+
+from .errors import ProtocolError
+from .protocol import MAX_ID, Mode, Reply, encode_read
+
+__all__ = ["IdPolicy", "Pending", "Session"]
+
+log = logging.getLogger(__name__)
+
+#: "fifo" is accepted as the old name of "legacy" (matching in order, now with checks).
+IdPolicy = Literal["auto", "strict", "legacy", "fifo"]
+IdState = Literal["unknown", "echoed", "legacy"]
+
+W = TypeVar("W")
+
+#: The variable the id probe reads twice: present on every KRC, cheap to read.
+PROBE_VARIABLE = "$OV_PRO"
+#: Bounds of the per-variable value-shape memory (legacy checks): entries and name length.
+_SHAPES_MAX = 1024
+_SHAPE_NAME_MAX = 200
+
+
+class Pending(Generic[W]):
+    """One request sent (or about to be) and not yet answered; ``waiter`` is transport-specific."""
+
+    __slots__ = (
+        "abandoned",
+        "frame",
+        "mode",
+        "msg_id",
+        "name",
+        "sent_at",
+        "size",
+        "timeout",
+        "waiter",
+    )
+
+    def __init__(self, msg_id: int, name: str, frame: bytes, waiter: W, timeout: float) -> None:
+        self.msg_id = msg_id
+        self.name = name
+        self.frame = frame
+        self.mode = frame[4] if len(frame) > 4 else -1
+        self.size = len(frame)
+        self.waiter = waiter
+        self.sent_at = 0.0
+        #: how long its caller waits (a reply later than this means the server is stalled)
+        self.timeout = timeout
+        #: the caller gave up (timeout, cancellation); its reply is still expected and discarded
+        self.abandoned = False
+
+
+def value_shape(value: bytes) -> str:
+    """A coarse class of a read's text that a variable keeps for life (type, not value)."""
+    first = value[:1]
+    if first == b"{":
+        colon = value.find(b":", 1, 64)
+        return value[: colon + 1].decode("latin-1") if colon > 0 else "{"
+    if first in (b'"', b"'", b"#"):
+        return first.decode("latin-1")
+    if value in (b"TRUE", b"FALSE"):
+        return "BOOL"
+    if first in b"+-.0123456789" and first:
+        return "number"
+    return "other"
+
+
+def _write_value(frame: bytes) -> bytes:
+    """The value block of a mode-1 request frame."""
+    n = int.from_bytes(frame[5:7], "big")
+    return frame[9 + n :]
+
+
+class Session(Generic[W]):
+    """Ids, the queue of pending requests and the matching rules of one connection."""
+
+    def __init__(
+        self,
+        endpoint: str,
+        *,
+        max_in_flight: int = 64,
+        pipeline_bytes: int = 2048,
+        id_policy: IdPolicy = "auto",
+    ) -> None:
+        if id_policy not in ("auto", "strict", "legacy", "fifo"):
+            raise ValueError(f"id_policy must be 'auto', 'strict' or 'legacy', not {id_policy!r}")
+        self.endpoint = endpoint
+        self.max_in_flight = max(1, max_in_flight)
+        self.pipeline_bytes = max(1, pipeline_bytes)
+        self.id_policy: IdPolicy = id_policy
+        self.ids: IdState = {"auto": "unknown", "strict": "echoed"}.get(id_policy, "legacy")  # type: ignore[assignment]
+        self.queue: deque[Pending[W]] = deque()
+        self.by_id: dict[int, Pending[W]] = {}
+        self.bytes_in_flight = 0
+        self._next_id = 0
+        #: the wire id of the last reply matched (a legacy batch repeats it)
+        self._last_label: int | None = None
+        self._probe: tuple[Pending[W], Pending[W]] | None = None
+        self._shapes: dict[str, str] = {}
+        #: replies matched in order because they repeated their batch's label (legacy proxies)
+        self.mislabeled_replies = 0
+        #: requests the server never answered (detected when a later reply arrived)
+        self.dropped_requests = 0
+
+    # ------------------------------------------------------------------ sending side
+
+    @property
+    def needs_probe(self) -> bool:
+        """True until ids are known to be echoed or proven legacy (``auto`` only)."""
+        return self.ids == "unknown"
+
+    def fits(self, size: int) -> bool:
+        if not self.queue:
+            return True  # a lone request always goes, whatever its size
+        return (
+            len(self.queue) < self.max_in_flight
+            and self.bytes_in_flight + size <= self.pipeline_bytes
+        )
+
+    def stalled(self, size: int, now: float) -> bool:
+        """No room, and the oldest request waits for longer than its timeout: the server has
+        stopped answering (its requests timed out and fill the window)."""
+        if not self.queue or self.fits(size):
+            return False
+        head = self.queue[0]
+        return now - head.sent_at > head.timeout
+
+    def stall_message(self, now: float) -> str:
+        head = self.queue[0]
+        waited = now - head.sent_at if head.sent_at else 0.0
+        return (
+            f"{self.endpoint} stopped answering: {len(self.queue)} requests unanswered, the oldest "
+            f"({head.name!r}) for {waited:.1f} s; the connection is marked unhealthy and closed"
+        )
+
+    def _alloc_id(self) -> int:
+        # Skip ids still pending (abandoned requests keep theirs until answered).
+        for _ in range(MAX_ID + 1):
+            msg_id = self._next_id
+            self._next_id = (msg_id + 1) & MAX_ID
+            if msg_id not in self.by_id:
+                return msg_id
+        raise ProtocolError("no free message id")  # pragma: no cover - needs 65536 pending
+
+    def register(self, name: str, frame0: bytes, waiter: W, timeout: float) -> Pending[W]:
+        """Queue ``frame0`` (built with id 0) under a free id; ``pending.frame`` is what to send."""
+        msg_id = self._alloc_id()
+        # ids are the first two bytes of every frame, so re-stamping is exact and cheap
+        frame = msg_id.to_bytes(2, "big") + frame0[2:]
+        pending = Pending(msg_id, name, frame, waiter, timeout)
+        self.queue.append(pending)
+        self.by_id[msg_id] = pending
+        self.bytes_in_flight += pending.size
+        return pending
+
+    def register_probe(self, waiter: W, now: float, timeout: float) -> bytes:
+        """Queue the id probe (``auto`` only, on a new connection); returns the bytes to send
+        in ONE write before anything else. Nobody waits for its replies (marked abandoned)."""
+        frame0 = encode_read(0, PROBE_VARIABLE)
+        first = self.register(PROBE_VARIABLE, frame0, waiter, timeout)
+        second = self.register(PROBE_VARIABLE, frame0, waiter, timeout)
+        first.abandoned = second.abandoned = True
+        first.sent_at = second.sent_at = now
+        self._probe = (first, second)
+        return first.frame + second.frame
+
+    # ------------------------------------------------------------------ receiving side
+
+    def dispatch(self, reply: Reply) -> tuple[Pending[W] | None, list[Pending[W]]]:
+        """Match ``reply``: ``(request it answers, requests found dropped)``.
+
+        The request is None when its caller had given up (the late reply is discarded).
+        Raises :class:`ProtocolError` when the reply cannot be attributed safely; the caller
+        must then drop the connection.
+        """
+        pending = self.by_id.get(reply.msg_id)
+        dropped: list[Pending[W]] = []
+        if pending is None:
+            pending = self._continuation(reply)
+        elif pending is not self.queue[0]:
+            # Servers never reorder: the requests ahead of it were dropped (KVP's busy flag).
+            while self.queue[0] is not pending:
+                dropped.append(self._finish(self.queue[0]))
+            self.dropped_requests += len(dropped)
+        self._check(pending, reply)
+        if self._probe is not None and pending is self._probe[1]:
+            if self.ids == "unknown":
+                self.ids = "echoed"
+                log.debug("%s echoes message ids: matching by id", self.endpoint)
+        self._last_label = reply.msg_id
+        self._finish(pending)
+        return (None if pending.abandoned else pending), dropped
+
+    def _continuation(self, reply: Reply) -> Pending[W]:
+        """A reply whose id is not pending: the legacy batch label, or a protocol error."""
+        head = self.queue[0] if self.queue else None
+        repeats = head is not None and reply.msg_id == self._last_label
+        if repeats and self.ids == "unknown" and self._probe is not None and head is self._probe[1]:
+            self.ids = "legacy"
+            log.warning(
+                "%s repeats the first message id of a batch (pre-9.0 KUKAVARPROXY): matching"
+                " replies in order, with mode, echo and value-shape checks",
+                self.endpoint,
+            )
+        if repeats and self.ids == "legacy":
+            assert head is not None
+            self.mislabeled_replies += 1
+            return head
+        why = (
+            "no request is pending"
+            if head is None
+            else f"{len(self.queue)} requests are pending, the oldest with id {head.msg_id}"
+        )
+        hint = ""
+        if repeats and self.ids != "legacy":
+            hint = (
+                " (it repeats the previous reply's id, as a pre-9.0 proxy does;"
+                " use id_policy='legacy' for such a proxy)"
+            )
+        raise ProtocolError(f"reply with id {reply.msg_id} answers no request: {why}{hint}")
+
+    def _check(self, pending: Pending[W], reply: Reply) -> None:
+        mode = pending.mode
+        if reply.mode is None:
+            if mode in (Mode.READ, Mode.WRITE):
+                raise ProtocolError(
+                    f"reply id {reply.msg_id} has no mode, but {pending.name!r} was a mode-{mode}"
+                    " request"
+                )
+        elif reply.mode != mode:
+            raise ProtocolError(
+                f"reply id {reply.msg_id} has mode {reply.mode}, but the request for"
+                f" {pending.name!r} had mode {mode}"
+            )
+        legacy = self.ids == "legacy"
+        if legacy and mode == Mode.WRITE:
+            sent = _write_value(pending.frame)
+            if reply.value != sent and (reply.ok or reply.value):
+                raise ProtocolError(
+                    f"reply id {reply.msg_id} does not echo the value written to {pending.name!r}"
+                )
+        elif mode == Mode.READ and reply.value and reply.status == 1:
+            self._check_shape(pending.name, reply)
+
+    def _check_shape(self, name: str, reply: Reply) -> None:
+        shape = value_shape(reply.value)
+        known = self._shapes.get(name)
+        if known is None:
+            if len(name) <= _SHAPE_NAME_MAX:
+                if len(self._shapes) >= _SHAPES_MAX:
+                    del self._shapes[next(iter(self._shapes))]  # the oldest entry
+                self._shapes[name] = shape
+        elif known != shape:
+            raise ProtocolError(
+                f"reply id {reply.msg_id} for {name!r} reads like {shape!r}, but that variable"
+                f" read like {known!r} before: a reply for another variable"
+            )
+
+    def _finish(self, pending: Pending[W]) -> Pending[W]:
+        if self.queue and self.queue[0] is pending:
+            self.queue.popleft()
+        else:  # pragma: no cover - defensive, the queue head is always the match
+            self.queue.remove(pending)
+        if self.by_id.get(pending.msg_id) is pending:
+            del self.by_id[pending.msg_id]
+        self.bytes_in_flight -= pending.size
+        if self._probe is not None and pending is self._probe[1]:
+            self._probe = None  # answered (or dropped): the probe is over either way
+        return pending
+
+    def clear(self) -> list[Pending[W]]:
+        """Forget every pending request (the connection is gone); returns them, oldest first."""
+        pendings = list(self.queue)
+        self.queue.clear()
+        self.by_id.clear()
+        self.bytes_in_flight = 0
+        self._probe = None
+        return pendings
