@@ -1,0 +1,337 @@
+"""One blocking TCP connection to a KUKAVARPROXY, for the synchronous client.
+
+The same rules as the asyncio connection — ids, matching and checks from
+:mod:`pyopenshowvar.session`, one write per burst of whole requests, bounded pipelining,
+timeouts that never desynchronise, stall detection — on a plain blocking socket: no event
+loop, no thread per call. A lock makes one connection safe to share between threads.
+
+Timeouts are kernel socket timeouts (``SO_RCVTIMEO``/``SO_SNDTIMEO``), set only when the
+call's timeout changes, so a serial read costs one ``send`` and one ``recv`` system call, as in
+the plainest client; Python's own socket timeouts would add a ``poll`` to every call.
+Keep-alive, when enabled, is a daemon thread that pings only while the connection is idle and
+nobody else holds it.
+"""
+
+from __future__ import annotations
+
+import logging
+import socket
+import struct
+import sys
+import threading
+import time
+
+from .errors import KvpConnectionError, KvpError, KvpStalledError, KvpTimeoutError, ProtocolError
+from .protocol import Reply, ReplyDecoder, encode_read
+from .session import IdPolicy, Pending, Session
+from .stats import AccessStats
+
+__all__ = ["BlockingConnection"]
+
+log = logging.getLogger(__name__)
+
+#: What a pending request of the blocking connection holds: nothing yet, its reply or its error.
+_Outcome = Reply | KvpError | None
+
+
+def _timeval(seconds: float) -> bytes:
+    if sys.platform == "win32":  # pragma: no cover - a DWORD of milliseconds on Windows
+        return struct.pack("I", max(1, int(seconds * 1000)))
+    sec = int(seconds)
+    usec = max(1, int((seconds - sec) * 1e6)) if sec == 0 else int((seconds - sec) * 1e6)
+    return struct.pack("ll", sec, usec)
+
+
+class BlockingConnection:
+    """A connected KVP session on a blocking socket (see :class:`pyopenshowvar.sync.Client`)."""
+
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        *,
+        timeout: float = 2.0,
+        max_in_flight: int = 64,
+        pipeline_bytes: int = 2048,
+        id_policy: IdPolicy = "auto",
+        keepalive: float | None = 10.0,
+    ) -> None:
+        self.host = host
+        self.port = port
+        self.timeout = timeout
+        self.keepalive = keepalive
+        self.session: Session[_Outcome] = Session(
+            self.endpoint,
+            max_in_flight=max_in_flight,
+            pipeline_bytes=pipeline_bytes,
+            id_policy=id_policy,
+        )
+        self.stats = AccessStats()
+        self.lock = threading.RLock()
+        self._sock: socket.socket | None = None
+        self._decoder = ReplyDecoder()
+        self._closed_reason: str | None = None
+        self._sock_timeout = -1.0
+        self._last_activity = time.monotonic()
+        self._ping_supported: bool | None = None
+        self._stop = threading.Event()
+
+    @property
+    def endpoint(self) -> str:
+        return f"{self.host}:{self.port}"
+
+    @property
+    def closed_reason(self) -> str | None:
+        """Why the connection was closed, lost or dropped (None while open)."""
+        return self._closed_reason
+
+    @property
+    def is_open(self) -> bool:
+        return self._sock is not None and self._closed_reason is None
+
+    # ------------------------------------------------------------------ life cycle
+
+    def connect(self, timeout: float) -> None:
+        try:
+            sock = socket.create_connection((self.host, self.port), timeout=timeout)
+        except TimeoutError as exc:
+            raise KvpTimeoutError(
+                f"connecting to {self.endpoint} timed out after {timeout:g} s"
+            ) from exc
+        except OSError as exc:
+            raise KvpConnectionError(
+                f"cannot connect to {self.endpoint}: {exc.strerror or exc}"
+            ) from exc
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        sock.settimeout(None)  # blocking; the kernel timeouts below bound every call
+        self._sock = sock
+        self._last_activity = time.monotonic()
+        if self.session.needs_probe:
+            self._sendall(self.session.register_probe(None, time.perf_counter(), self.timeout))
+        if self.keepalive:
+            threading.Thread(
+                target=self._keepalive_loop, name=f"kvp-keepalive {self.endpoint}", daemon=True
+            ).start()
+        log.debug("connected to %s", self.endpoint)
+
+    def close(self) -> None:
+        self._stop.set()
+        with self.lock:
+            if self._sock is not None and self._closed_reason is None:
+                self._fail_all(f"connection to {self.endpoint} closed")
+
+    # ------------------------------------------------------------------ requests
+
+    def request(self, name: str, frame0: bytes, timeout: float | None) -> Reply:
+        """Send one request and wait for its reply (raises its error)."""
+        timeout = self.timeout if timeout is None else timeout
+        with self.lock:
+            session = self.session
+            self._check_open()
+            deadline = time.perf_counter() + timeout
+            if not session.fits(len(frame0)):
+                self._wait_for_room(len(frame0), deadline, True)
+            pending = session.register(name, frame0, None, timeout)
+            pending.sent_at = time.perf_counter()
+            self._sendall(pending.frame)
+            while pending.waiter is None:
+                if not self._receive(deadline):
+                    pending.abandoned = True
+                    raise KvpTimeoutError(
+                        f"no reply for {name!r} from {self.endpoint} within {timeout:g} s"
+                    )
+            outcome = pending.waiter
+            if isinstance(outcome, KvpError):
+                raise outcome
+            return outcome
+
+    def request_many(
+        self, items: list[tuple[str, bytes]], timeout: float | None
+    ) -> list[Reply | KvpError]:
+        """Send many requests pipelined; a reply or an error for each, in order."""
+        timeout = self.timeout if timeout is None else timeout
+        with self.lock:
+            session = self.session
+            self._check_open()
+            deadline = time.perf_counter() + timeout
+            pendings: list[Pending[_Outcome]] = []
+            batch: list[bytes] = []
+            timed_out = False
+            for name, frame0 in items:
+                if not session.fits(len(frame0)):
+                    self._flush(batch, pendings)
+                    if not self._wait_for_room(len(frame0), deadline, not pendings):
+                        timed_out = True
+                        break
+                pending = session.register(name, frame0, None, timeout)
+                pendings.append(pending)
+                batch.append(pending.frame)
+            self._flush(batch, pendings)
+            while not timed_out and any(p.waiter is None for p in pendings):
+                timed_out = not self._receive(deadline)
+            results: list[Reply | KvpError] = []
+            for p in pendings:
+                if p.waiter is None:
+                    p.abandoned = True
+                    p.waiter = KvpTimeoutError(
+                        f"no reply for {p.name!r} from {self.endpoint} within {timeout:g} s"
+                    )
+                results.append(p.waiter)
+            for result in results:  # a lost connection fails the whole call, as in asyncio
+                if isinstance(result, KvpConnectionError):
+                    raise result
+            results += [
+                KvpTimeoutError(f"no room to send {name!r} to {self.endpoint} within {timeout:g} s")
+                for name, _ in items[len(pendings) :]
+            ]
+            return results
+
+    def _flush(self, batch: list[bytes], pendings: list[Pending[_Outcome]]) -> None:
+        if batch:
+            now = time.perf_counter()
+            for p in pendings[len(pendings) - len(batch) :]:
+                p.sent_at = now
+            self._sendall(b"".join(batch))
+            batch.clear()
+
+    def _wait_for_room(self, size: int, deadline: float, sent_nothing: bool) -> bool:
+        """Receive until ``size`` more bytes may be sent; False at the deadline."""
+        session = self.session
+        while not session.fits(size):
+            if session.stalled(size, time.perf_counter()):
+                message = session.stall_message(time.perf_counter())
+                log.warning("%s", message)
+                self._fail_all(message)
+                raise KvpStalledError(message, sent_nothing=sent_nothing)
+            if not self._receive(deadline):
+                return False
+            self._check_open()
+        return True
+
+    # ------------------------------------------------------------------ socket
+
+    def _check_open(self) -> None:
+        if self._closed_reason is not None:
+            raise KvpConnectionError(
+                f"connection to {self.endpoint} is closed: {self._closed_reason}"
+            )
+        if self._sock is None:
+            raise KvpConnectionError(f"not connected to {self.endpoint}")
+
+    def _set_timeout(self, seconds: float) -> None:
+        assert self._sock is not None
+        if seconds != self._sock_timeout:
+            tv = _timeval(seconds)
+            self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, tv)
+            self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO, tv)
+            self._sock_timeout = seconds
+
+    def _sendall(self, data: bytes) -> None:
+        sock = self._sock
+        assert sock is not None
+        self._last_activity = time.monotonic()
+        if self._sock_timeout < 0:
+            self._set_timeout(self.timeout)
+        try:
+            sock.sendall(data)
+        except OSError as exc:
+            # Timed out or failed part-way: the stream may hold half a request; drop it.
+            why = "timed out" if isinstance(exc, BlockingIOError | TimeoutError) else str(exc)
+            self._fail_all(f"sending to {self.endpoint} failed: {why}")
+            raise KvpConnectionError(f"sending to {self.endpoint} failed: {why}") from None
+
+    def _receive(self, deadline: float) -> bool:
+        """One ``recv`` and the dispatch of the replies it completes; False at the deadline.
+
+        A lost connection or a protocol error fails every unanswered request (their outcome
+        is a :class:`KvpConnectionError`) and closes the connection; it does not raise.
+        """
+        sock = self._sock
+        assert sock is not None
+        remaining = deadline - time.perf_counter()
+        if remaining <= 0:
+            return False
+        current = self._sock_timeout
+        # Re-arm the kernel timeout only when it is far off (a syscall): a wait may overshoot
+        # the deadline by at most 10 % + 5 ms, and never stops short of it.
+        if current < 0 or current > remaining * 1.1 + 0.005 or current < remaining / 2:
+            self._set_timeout(remaining)
+        try:
+            data = sock.recv(65536)
+        except (BlockingIOError, TimeoutError):
+            return time.perf_counter() < deadline
+        except OSError as exc:
+            self._fail_all(f"{self.endpoint} closed the connection: {exc}")
+            return True
+        if not data:
+            try:
+                self._decoder.eof()
+                reason = f"{self.endpoint} closed the connection"
+            except ProtocolError:
+                reason = f"{self.endpoint} closed the connection in the middle of a reply"
+            self._fail_all(reason)
+            return True
+        now = time.perf_counter()
+        self._last_activity = time.monotonic()
+        session = self.session
+        try:
+            for reply in self._decoder.feed_replies(data):
+                pending, dropped = session.dispatch(reply)
+                for lost in dropped:
+                    lost.waiter = KvpTimeoutError(
+                        f"{self.endpoint} never answered the request for {lost.name!r}"
+                    )
+                if pending is not None:
+                    self.stats.record(now - pending.sent_at)
+                    pending.waiter = reply
+        except ProtocolError as exc:
+            log.warning("protocol error from %s: %s; dropping the connection", self.endpoint, exc)
+            # replies matched before the bad one keep their outcome; the rest fail
+            self._fail_all(f"connection to {self.endpoint} dropped: protocol error: {exc}")
+        return True
+
+    def _fail_all(self, reason: str) -> None:
+        if self._closed_reason is None:
+            self._closed_reason = reason
+        for p in self.session.clear():
+            if p.waiter is None:
+                p.waiter = KvpConnectionError(reason)
+        self._stop.set()
+        if self._sock is not None:
+            try:
+                self._sock.close()
+            except OSError:  # pragma: no cover - closing never matters here
+                pass
+
+    # ------------------------------------------------------------------ keep-alive
+
+    def _keepalive_loop(self) -> None:
+        assert self.keepalive
+        interval = self.keepalive
+        while not self._stop.wait(max(interval / 10, 0.01)):
+            if time.monotonic() - self._last_activity < interval:
+                continue
+            if not self.lock.acquire(blocking=False):
+                continue  # a call is running: the connection is not idle
+            try:
+                if self.is_open:
+                    self.ping(None)
+            except KvpError as exc:
+                log.info("keep-alive to %s failed: %s", self.endpoint, exc)
+            finally:
+                self.lock.release()
+
+    def ping(self, timeout: float | None) -> float:
+        """Round trip of a keep-alive request in seconds (``PING`` or, on old proxies, ``$OV_PRO``)."""
+        start = time.perf_counter()
+        if self._ping_supported is not False:
+            reply = self.request("PING", encode_read(0, "PING"), timeout)
+            if reply.ok and reply.value == b"PONG":
+                self._ping_supported = True
+                return time.perf_counter() - start
+            self._ping_supported = False
+            log.info(
+                "%s does not answer PING (pre-9.0 proxy); keeping alive with $OV_PRO", self.endpoint
+            )
+        self.request("$OV_PRO", encode_read(0, "$OV_PRO"), timeout)
+        return time.perf_counter() - start
