@@ -95,10 +95,16 @@ def test_inverse_all_solutions_are_exact(q: np.ndarray) -> None:
     sols = inverse_all(M, target)
     assert 1 <= len(sols) <= 8
     _assert_same_pose(fk_matrix(M, sols), np.broadcast_to(target, (len(sols), 4, 4)))
+
+
+@settings(max_examples=100, deadline=None)
+@given(axis_vectors)
+def test_inverse_all_contains_q_away_from_singularities(q: np.ndarray) -> None:
     # q itself (mod 360) is among them unless a singularity made its free angle arbitrary
-    if _regular(q):
-        wrapped = 180.0 - (180.0 - q) % 360.0
-        assert np.min(np.max(np.abs(sols - wrapped), axis=1)) < 1e-6
+    assume(_regular(q))
+    sols = inverse_all(M, fk_matrix(M, q))
+    wrapped = 180.0 - (180.0 - q) % 360.0
+    assert np.min(np.max(np.abs(sols - wrapped), axis=1)) < 1e-6
 
 
 def test_eight_solutions_with_wrist_flips() -> None:
