@@ -4,8 +4,11 @@ The emulator runs in a separate process (``bench/_emu_server.py``, same options 
 ``kukavarproxy-emu``). Figures, each the median of ``--repeat`` runs, ours and the peer's
 measured alternately in the same run:
 
-1. serial read round trip of ``$AXIS_ACT`` (one request in flight), latency ``none``:
-   ``Client.read`` vs ``py_openshowvar.openshowvar(ip, port).read(name, debug=False)``;
+1. serial read round trip of ``$AXIS_ACT`` (one request in flight), latency ``none``, against
+   ``py_openshowvar.openshowvar(ip, port).read(name, debug=False)``: the synchronous client
+   ``pyopenshowvar.sync.Client.read`` (target ≤ 1.0×), the asyncio ``Client.read`` run by
+   ``pyopenshowvar.run`` (uvloop when installed; target ≤ 1.5×), and the asyncio client on
+   the stock asyncio loop (informative);
 2. 100 variables (``MYE6ARRAY[1..100]``) in one ``read_many`` vs a loop of 100 py-openshowvar
    reads, latency ``none``;
 3. ``read_joint_torques()`` vs six sequential element reads ``$TORQUE_AXIS_ACT[1..6]`` (what
@@ -34,7 +37,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import EmuProcess, Row, base_parser, median, print_rows, write_json
 
 from kukavarproxy_emu.latency import PROFILES, LatencyProfile
-from pyopenshowvar import Client, parse_value
+from pyopenshowvar import Client, parse_value, sync
+from pyopenshowvar import run as run_client
 
 try:
     import py_openshowvar
@@ -60,6 +64,28 @@ async def _ours_serial(port: int, n: int) -> float:
             await kvp.read("$AXIS_ACT")
             times.append(clock() - t0)
     return median(times)
+
+
+def _sync_serial(port: int, n: int) -> float:
+    """Median seconds of one blocking ``read``."""
+    with sync.Client("127.0.0.1", port, keepalive=None) as kvp:
+        for _ in range(min(200, n)):
+            kvp.read("$AXIS_ACT")
+        times = []
+        clock = time.perf_counter
+        for _ in range(n):
+            t0 = clock()
+            kvp.read("$AXIS_ACT")
+            times.append(clock() - t0)
+    return median(times)
+
+
+def _uvloop_name() -> str:
+    try:
+        import uvloop  # noqa: F401
+    except ImportError:
+        return "asyncio (uvloop not installed)"
+    return "uvloop"
 
 
 def _peer_serial(port: int, n: int) -> float:
@@ -177,26 +203,54 @@ def run(quick: bool, repeat: int) -> tuple[list[Row], dict[str, Any]]:
     many_calls = 3 if quick else 40
     has_peer = py_openshowvar is not None
     with EmuProcess("--latency", "none") as emu:
-        ours_rt, peer_rt = [], []
+        sync_rt, fast_rt, ours_rt, peer_rt = [], [], [], []
         names = asyncio.run(_prepare_array(emu.port, 100))
         ours_many, peer_many = [], []
         for _ in range(repeat):
-            ours_rt.append(asyncio.run(_ours_serial(emu.port, n_serial)))
+            # alternate the clients within each run, so load drifts hit all of them alike
             if has_peer:
                 peer_rt.append(_peer_serial(emu.port, n_serial))
+            sync_rt.append(_sync_serial(emu.port, n_serial))
+            fast_rt.append(run_client(_ours_serial(emu.port, n_serial)))
+            ours_rt.append(asyncio.run(_ours_serial(emu.port, n_serial)))
             ours_many.append(asyncio.run(_ours_many(emu.port, names, many_calls)))
             if has_peer:
                 peer_many.append(_peer_many(emu.port, names, max(1, many_calls // 4)))
+    peer = median(peer_rt) * 1e6 if peer_rt else None
+    note = "" if has_peer else "py-openshowvar not installed: peer skipped"
     rows.append(
         Row(
-            "serial read round trip `$AXIS_ACT` (latency none, median)",
-            median(ours_rt) * 1e6,
+            "serial read round trip `$AXIS_ACT`, sync client (latency none, median)",
+            median(sync_rt) * 1e6,
             "µs",
-            peer=median(peer_rt) * 1e6 if peer_rt else None,
+            peer=peer,
             peer_name="py-openshowvar",
             target=("ratio", "<=", 1.0),
+            runs=[x * 1e6 for x in sync_rt],
+            note=note,
+        )
+    )
+    rows.append(
+        Row(
+            f"same, asyncio client on {_uvloop_name()} (`pyopenshowvar.run`)",
+            median(fast_rt) * 1e6,
+            "µs",
+            peer=peer,
+            peer_name="py-openshowvar",
+            target=("ratio", "<=", 1.5),
+            runs=[x * 1e6 for x in fast_rt],
+            note=note,
+        )
+    )
+    rows.append(
+        Row(
+            "same, asyncio client on the stock asyncio loop (`asyncio.run`)",
+            median(ours_rt) * 1e6,
+            "µs",
+            peer=peer,
+            peer_name="py-openshowvar",
             runs=[x * 1e6 for x in ours_rt],
-            note="" if has_peer else "py-openshowvar not installed: peer skipped",
+            note="informative: the stock loop's own cost per wake-up",
         )
     )
     rows.append(

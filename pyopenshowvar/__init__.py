@@ -22,7 +22,7 @@ Quick start::
 
 from __future__ import annotations
 
-from .client import Client, ReadResult, connect
+from .client import Client, ReadResult, connect, run
 from .errors import (
     KrlValueError,
     KvpConnectionError,
@@ -84,4 +84,5 @@ __all__ = [
     "format_value",
     "parse_array",
     "parse_value",
+    "run",
 ]

@@ -20,11 +20,12 @@ import struct
 import sys
 import threading
 import time
+from typing import Any, NoReturn
 
 from .errors import KvpConnectionError, KvpError, KvpStalledError, KvpTimeoutError, ProtocolError
-from .protocol import Reply, ReplyDecoder, encode_read
-from .session import IdPolicy, Pending, Session
-from .stats import AccessStats
+from .link import LinkBase
+from .protocol import Reply
+from .session import Pending, new_reply
 
 __all__ = ["BlockingConnection"]
 
@@ -32,6 +33,8 @@ log = logging.getLogger(__name__)
 
 #: What a pending request of the blocking connection holds: nothing yet, its reply or its error.
 _Outcome = Reply | KvpError | None
+#: id, L, mode, value length: the head of a reply
+_HEAD = struct.Struct(">HHBH")
 
 
 def _timeval(seconds: float) -> bytes:
@@ -42,48 +45,15 @@ def _timeval(seconds: float) -> bytes:
     return struct.pack("ll", sec, usec)
 
 
-class BlockingConnection:
+class BlockingConnection(LinkBase[_Outcome]):
     """A connected KVP session on a blocking socket (see :class:`pyopenshowvar.sync.Client`)."""
 
-    def __init__(
-        self,
-        host: str,
-        port: int,
-        *,
-        timeout: float = 2.0,
-        max_in_flight: int = 64,
-        pipeline_bytes: int = 2048,
-        id_policy: IdPolicy = "auto",
-        keepalive: float | None = 10.0,
-    ) -> None:
-        self.host = host
-        self.port = port
-        self.timeout = timeout
-        self.keepalive = keepalive
-        self.session: Session[_Outcome] = Session(
-            self.endpoint,
-            max_in_flight=max_in_flight,
-            pipeline_bytes=pipeline_bytes,
-            id_policy=id_policy,
-        )
-        self.stats = AccessStats()
+    def __init__(self, host: str, port: int, **kw: Any) -> None:
+        super().__init__(host, port, **kw)
         self.lock = threading.RLock()
         self._sock: socket.socket | None = None
-        self._decoder = ReplyDecoder()
-        self._closed_reason: str | None = None
         self._sock_timeout = -1.0
-        self._last_activity = time.monotonic()
-        self._ping_supported: bool | None = None
         self._stop = threading.Event()
-
-    @property
-    def endpoint(self) -> str:
-        return f"{self.host}:{self.port}"
-
-    @property
-    def closed_reason(self) -> str | None:
-        """Why the connection was closed, lost or dropped (None while open)."""
-        return self._closed_reason
 
     @property
     def is_open(self) -> bool:
@@ -94,18 +64,12 @@ class BlockingConnection:
     def connect(self, timeout: float) -> None:
         try:
             sock = socket.create_connection((self.host, self.port), timeout=timeout)
-        except TimeoutError as exc:
-            raise KvpTimeoutError(
-                f"connecting to {self.endpoint} timed out after {timeout:g} s"
-            ) from exc
-        except OSError as exc:
-            raise KvpConnectionError(
-                f"cannot connect to {self.endpoint}: {exc.strerror or exc}"
-            ) from exc
+        except OSError as exc:  # TimeoutError included
+            raise self._connect_error(exc, timeout) from exc
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         sock.settimeout(None)  # blocking; the kernel timeouts below bound every call
         self._sock = sock
-        self._last_activity = time.monotonic()
+        self._last_activity = time.perf_counter()
         if self.session.needs_probe:
             self._sendall(self.session.register_probe(None, time.perf_counter(), self.timeout))
         if self.keepalive:
@@ -127,23 +91,72 @@ class BlockingConnection:
         timeout = self.timeout if timeout is None else timeout
         with self.lock:
             session = self.session
-            self._check_open()
-            deadline = time.perf_counter() + timeout
-            if not session.fits(len(frame0)):
-                self._wait_for_room(len(frame0), deadline, True)
-            pending = session.register(name, frame0, None, timeout)
-            pending.sent_at = time.perf_counter()
-            self._sendall(pending.frame)
-            while pending.waiter is None:
-                if not self._receive(deadline):
-                    pending.abandoned = True
-                    raise KvpTimeoutError(
-                        f"no reply for {name!r} from {self.endpoint} within {timeout:g} s"
-                    )
-            outcome = pending.waiter
-            if isinstance(outcome, KvpError):
-                raise outcome
-            return outcome
+            sock = self._sock
+            if (
+                sock is None
+                or self._closed_reason is not None
+                or session.queue
+                or self._decoder.buffered
+            ):
+                self._check_open()
+                return self._request_queued(name, frame0, timeout)
+            # The serial case, on an idle connection: the reply normally comes whole in one
+            # recv, and then needs no queue, no index and no decoder buffer. This path is the
+            # control-loop hot path, hence written out rather than split into helpers.
+            if self._sock_timeout != timeout:
+                self._fit_timeout(timeout)
+            frame = session.stamp_idle(frame0)
+            self._last_activity = sent_at = time.perf_counter()
+            try:
+                sock.sendall(frame)
+            except OSError as exc:
+                self._send_failed(exc)
+            try:
+                data = sock.recv(65536)
+            except OSError:
+                data = b""  # timed out or lost: the general path meets it again and decides
+            size = len(data)
+            if size >= 10 and data[:2] == frame[:2]:
+                msg_id, length, mode, n = _HEAD.unpack_from(data)
+                if length + 4 == size and n + 10 == size:
+                    reply = new_reply(msg_id, mode, data[7:-3], data[-1], data[-3:-1])
+                    now = time.perf_counter()
+                    try:
+                        session.answered_idle(name, frame, reply)
+                    except ProtocolError as exc:
+                        self._protocol_error(exc)
+                        raise KvpConnectionError(self._closed_reason or "") from None
+                    self.stats.record(now - sent_at)
+                    return reply
+            # anything else (a cut reply, several frames, another id, a timeout): queue the
+            # request after all and let the general path sort it out
+            pending = session.register_sent(name, frame, None, timeout)
+            pending.sent_at = sent_at
+            if data:
+                self._dispatch(data)
+            return self._wait(pending, sent_at + timeout, timeout)
+
+    def _request_queued(self, name: str, frame0: bytes, timeout: float) -> Reply:
+        session = self.session
+        deadline = time.perf_counter() + timeout
+        if not session.fits(len(frame0)):
+            self._wait_for_room(len(frame0), deadline, True)
+        pending = session.register(name, frame0, None, timeout)
+        pending.sent_at = time.perf_counter()
+        self._sendall(pending.frame)
+        return self._wait(pending, deadline, timeout)
+
+    def _wait(self, pending: Pending[_Outcome], deadline: float, timeout: float) -> Reply:
+        while pending.waiter is None:
+            if not self._receive(deadline):
+                pending.abandoned = True
+                raise KvpTimeoutError(
+                    f"no reply for {pending.name!r} from {self.endpoint} within {timeout:g} s"
+                )
+        outcome = pending.waiter
+        if isinstance(outcome, KvpError):
+            raise outcome
+        return outcome
 
     def request_many(
         self, items: list[tuple[str, bytes]], timeout: float | None
@@ -211,10 +224,7 @@ class BlockingConnection:
     # ------------------------------------------------------------------ socket
 
     def _check_open(self) -> None:
-        if self._closed_reason is not None:
-            raise KvpConnectionError(
-                f"connection to {self.endpoint} is closed: {self._closed_reason}"
-            )
+        super()._check_open()
         if self._sock is None:
             raise KvpConnectionError(f"not connected to {self.endpoint}")
 
@@ -229,16 +239,26 @@ class BlockingConnection:
     def _sendall(self, data: bytes) -> None:
         sock = self._sock
         assert sock is not None
-        self._last_activity = time.monotonic()
+        self._last_activity = time.perf_counter()
         if self._sock_timeout < 0:
             self._set_timeout(self.timeout)
         try:
             sock.sendall(data)
         except OSError as exc:
-            # Timed out or failed part-way: the stream may hold half a request; drop it.
-            why = "timed out" if isinstance(exc, BlockingIOError | TimeoutError) else str(exc)
-            self._fail_all(f"sending to {self.endpoint} failed: {why}")
-            raise KvpConnectionError(f"sending to {self.endpoint} failed: {why}") from None
+            self._send_failed(exc)
+
+    def _send_failed(self, exc: OSError) -> NoReturn:
+        # Timed out or failed part-way: the stream may hold half a request; drop it.
+        why = "timed out" if isinstance(exc, BlockingIOError | TimeoutError) else str(exc)
+        self._fail_all(f"sending to {self.endpoint} failed: {why}")
+        raise KvpConnectionError(f"sending to {self.endpoint} failed: {why}") from None
+
+    def _fit_timeout(self, timeout: float) -> None:
+        """Re-arm the kernel timeout only when it is far off (a syscall): a wait may overshoot
+        the deadline by at most 10 % + 5 ms, and never stops short of it."""
+        current = self._sock_timeout
+        if current < 0 or current > timeout * 1.1 + 0.005 or current < timeout / 2:
+            self._set_timeout(timeout)
 
     def _receive(self, deadline: float) -> bool:
         """One ``recv`` and the dispatch of the replies it completes; False at the deadline.
@@ -251,11 +271,7 @@ class BlockingConnection:
         remaining = deadline - time.perf_counter()
         if remaining <= 0:
             return False
-        current = self._sock_timeout
-        # Re-arm the kernel timeout only when it is far off (a syscall): a wait may overshoot
-        # the deadline by at most 10 % + 5 ms, and never stops short of it.
-        if current < 0 or current > remaining * 1.1 + 0.005 or current < remaining / 2:
-            self._set_timeout(remaining)
+        self._fit_timeout(remaining)
         try:
             data = sock.recv(65536)
         except (BlockingIOError, TimeoutError):
@@ -264,15 +280,14 @@ class BlockingConnection:
             self._fail_all(f"{self.endpoint} closed the connection: {exc}")
             return True
         if not data:
-            try:
-                self._decoder.eof()
-                reason = f"{self.endpoint} closed the connection"
-            except ProtocolError:
-                reason = f"{self.endpoint} closed the connection in the middle of a reply"
-            self._fail_all(reason)
+            self._fail_all(self._eof_reason())
             return True
+        self._dispatch(data)
+        return True
+
+    def _dispatch(self, data: bytes) -> None:
         now = time.perf_counter()
-        self._last_activity = time.monotonic()
+        self._last_activity = time.perf_counter()
         session = self.session
         try:
             for reply in self._decoder.feed_replies(data):
@@ -285,10 +300,12 @@ class BlockingConnection:
                     self.stats.record(now - pending.sent_at)
                     pending.waiter = reply
         except ProtocolError as exc:
-            log.warning("protocol error from %s: %s; dropping the connection", self.endpoint, exc)
-            # replies matched before the bad one keep their outcome; the rest fail
-            self._fail_all(f"connection to {self.endpoint} dropped: protocol error: {exc}")
-        return True
+            self._protocol_error(exc)
+
+    def _protocol_error(self, exc: ProtocolError) -> None:
+        log.warning("protocol error from %s: %s; dropping the connection", self.endpoint, exc)
+        # replies matched before the bad one keep their outcome; the rest fail
+        self._fail_all(f"connection to {self.endpoint} dropped: protocol error: {exc}")
 
     def _fail_all(self, reason: str) -> None:
         if self._closed_reason is None:
@@ -309,7 +326,7 @@ class BlockingConnection:
         assert self.keepalive
         interval = self.keepalive
         while not self._stop.wait(max(interval / 10, 0.01)):
-            if time.monotonic() - self._last_activity < interval:
+            if time.perf_counter() - self._last_activity < interval:
                 continue
             if not self.lock.acquire(blocking=False):
                 continue  # a call is running: the connection is not idle
@@ -324,14 +341,8 @@ class BlockingConnection:
     def ping(self, timeout: float | None) -> float:
         """Round trip of a keep-alive request in seconds (``PING`` or, on old proxies, ``$OV_PRO``)."""
         start = time.perf_counter()
-        if self._ping_supported is not False:
-            reply = self.request("PING", encode_read(0, "PING"), timeout)
-            if reply.ok and reply.value == b"PONG":
-                self._ping_supported = True
-                return time.perf_counter() - start
-            self._ping_supported = False
-            log.info(
-                "%s does not answer PING (pre-9.0 proxy); keeping alive with $OV_PRO", self.endpoint
-            )
-        self.request("$OV_PRO", encode_read(0, "$OV_PRO"), timeout)
+        name, frame = self._keepalive_frame()
+        if not self._keepalive_answered(name, self.request(name, frame, timeout)):
+            name, frame = self._keepalive_frame()
+            self.request(name, frame, timeout)
         return time.perf_counter() - start

@@ -27,13 +27,15 @@ from __future__ import annotations
 import asyncio
 import logging
 import socket
+import struct
 import time
 from collections.abc import Callable
+from typing import Any
 
 from .errors import KvpConnectionError, KvpError, KvpStalledError, KvpTimeoutError, ProtocolError
-from .protocol import Reply, ReplyDecoder, encode_read, encode_write
-from .session import IdPolicy, Pending, Session
-from .stats import AccessStats
+from .link import LinkBase
+from .protocol import Reply, encode_read, encode_write
+from .session import IdPolicy, Pending, new_reply
 
 __all__ = ["Connection", "IdPolicy"]
 
@@ -42,6 +44,8 @@ log = logging.getLogger(__name__)
 #: Builds a complete request frame for a given message id.
 _Builder = Callable[[int], bytes]
 _Fut = asyncio.Future[Reply]
+#: id, L, mode, value length: the head of a reply
+_HEAD = struct.Struct(">HHBH")
 
 
 def _fail(future: _Fut, exc: BaseException) -> None:
@@ -65,74 +69,21 @@ class _Protocol(asyncio.Protocol):
         self.owner._on_lost(exc)
 
 
-class Connection:
+class Connection(LinkBase[_Fut]):
     """A connected KVP session. Use :meth:`open`; normally wrapped by :class:`~pyopenshowvar.Client`."""
 
-    def __init__(
-        self,
-        host: str,
-        port: int,
-        *,
-        timeout: float = 2.0,
-        max_in_flight: int = 64,
-        pipeline_bytes: int = 2048,
-        id_policy: IdPolicy = "auto",
-        keepalive: float | None = 10.0,
-    ) -> None:
-        self.host = host
-        self.port = port
-        self.timeout = timeout
-        self.keepalive = keepalive
-        self.session: Session[_Fut] = Session(
-            self.endpoint,
-            max_in_flight=max_in_flight,
-            pipeline_bytes=pipeline_bytes,
-            id_policy=id_policy,
-        )
-        self.stats = AccessStats()
+    def __init__(self, host: str, port: int, **kw: Any) -> None:
+        super().__init__(host, port, **kw)
         self._transport: asyncio.Transport | None = None
-        self._decoder = ReplyDecoder()
         self._slot = asyncio.Event()
-        self._closed_reason: str | None = None
-        self._last_activity = time.monotonic()
         self._keepalive_task: asyncio.Task[None] | None = None
-        self._ping_supported: bool | None = None
-
-    @property
-    def endpoint(self) -> str:
-        return f"{self.host}:{self.port}"
-
-    @property
-    def id_policy(self) -> IdPolicy:
-        return self.session.id_policy
-
-    @property
-    def mislabeled_replies(self) -> int:
-        """Replies matched in order because they repeated their batch's id (pre-9.0 proxies)."""
-        return self.session.mislabeled_replies
-
-    @property
-    def dropped_requests(self) -> int:
-        """Requests the server never answered (detected when a later reply arrived)."""
-        return self.session.dropped_requests
-
-    def use_stats(self, stats: AccessStats) -> None:
-        """Record into ``stats`` (the client keeps one object across reconnects)."""
-        self.stats = stats
-
-    @property
-    def closed_reason(self) -> str | None:
-        """Why the connection was closed, lost or dropped (None while open)."""
-        return self._closed_reason
+        self._watchdog: asyncio.TimerHandle | None = None
+        self._watchdog_at = 0.0
 
     @property
     def is_open(self) -> bool:
         """Connected and healthy: False once lost, closed, dropped or marked stalled."""
         return self._transport is not None and self._closed_reason is None
-
-    @property
-    def in_flight(self) -> int:
-        return len(self.session.queue)
 
     # ------------------------------------------------------------------ life cycle
 
@@ -140,7 +91,7 @@ class Connection:
     async def open(
         cls, host: str, port: int, *, connect_timeout: float | None = None, **kw: object
     ) -> Connection:
-        conn = cls(host, port, **kw)  # type: ignore[arg-type]
+        conn = cls(host, port, **kw)
         await conn._connect(connect_timeout if connect_timeout is not None else conn.timeout)
         return conn
 
@@ -151,21 +102,15 @@ class Connection:
                 transport, _ = await loop.create_connection(
                     lambda: _Protocol(self), self.host, self.port
                 )
-        except TimeoutError as exc:
-            raise KvpTimeoutError(
-                f"connecting to {self.endpoint} timed out after {timeout:g} s"
-            ) from exc
-        except OSError as exc:
-            raise KvpConnectionError(
-                f"cannot connect to {self.endpoint}: {exc.strerror or exc}"
-            ) from exc
+        except OSError as exc:  # TimeoutError included
+            raise self._connect_error(exc, timeout) from exc
         sock = transport.get_extra_info("socket")
         if sock is not None:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         # No isinstance check on the transport: uvloop's transports are not asyncio.Transport
         # subclasses, and only the interface matters.
         self._transport = transport
-        self._last_activity = time.monotonic()
+        self._last_activity = time.perf_counter()
         if self.session.needs_probe:
             probe = self.session.register_probe(
                 loop.create_future(), time.perf_counter(), self.timeout
@@ -199,16 +144,40 @@ class Connection:
         """Send a frame made by ``build(msg_id)`` (used for modes 2/3 and tests)."""
         return await self._request(name, build(0), timeout)
 
-    def _expire(self, pendings: list[Pending[_Fut]], timeout: float) -> None:
-        for p in pendings:
-            if not p.waiter.done():
-                p.abandoned = True
-                _fail(
-                    p.waiter,
-                    KvpTimeoutError(
-                        f"no reply for {p.name!r} from {self.endpoint} within {timeout:g} s"
-                    ),
-                )
+    # One watchdog timer per connection, not one timer per request: requests carry their
+    # deadline and the watchdog, armed for the earliest one, fails those overdue when it fires
+    # (in the serial case it is re-armed once per timeout period, not once per request).
+
+    def _watch(self, loop: asyncio.AbstractEventLoop, deadline: float) -> None:
+        if self._watchdog is None or deadline < self._watchdog_at:
+            if self._watchdog is not None:
+                self._watchdog.cancel()
+            self._watchdog = loop.call_at(deadline, self._on_watchdog, loop)
+            self._watchdog_at = deadline
+
+    def _on_watchdog(self, loop: asyncio.AbstractEventLoop) -> None:
+        self._watchdog = None
+        now = loop.time()
+        upcoming = None
+        for p in self.session.queue:
+            if p.abandoned or p.waiter.done():
+                continue
+            if p.deadline <= now:
+                self._expire(p)
+            elif upcoming is None or p.deadline < upcoming:
+                upcoming = p.deadline
+        if upcoming is not None:
+            self._watch(loop, upcoming)
+
+    def _expire(self, p: Pending[_Fut]) -> None:
+        if not p.waiter.done():
+            p.abandoned = True
+            _fail(
+                p.waiter,
+                KvpTimeoutError(
+                    f"no reply for {p.name!r} from {self.endpoint} within {p.timeout:g} s"
+                ),
+            )
 
     async def _request(self, name: str, frame0: bytes, timeout: float | None) -> Reply:
         session = self.session
@@ -220,22 +189,20 @@ class Connection:
             and not transport.is_closing()
         ):
             # Fast path of request_many for one request on an idle connection (the serial
-            # control-loop case): same registration, timer, send and outcome, less overhead.
+            # control-loop case): same registration, deadline, send and outcome, less overhead.
             timeout = self.timeout if timeout is None else timeout
             loop = asyncio.get_running_loop()
             pending = session.register(name, frame0, loop.create_future(), timeout)
-            pendings = [pending]
-            timer = loop.call_at(loop.time() + timeout, self._expire, pendings, timeout)
+            pending.deadline = deadline = loop.time() + timeout
+            if self._watchdog is None or deadline < self._watchdog_at:
+                self._watch(loop, deadline)
+            self._last_activity = pending.sent_at = time.perf_counter()
+            transport.write(pending.frame)
             try:
-                pending.sent_at = time.perf_counter()
-                self._last_activity = time.monotonic()
-                transport.write(pending.frame)
                 return await pending.waiter
             except asyncio.CancelledError:
                 pending.abandoned = True
                 raise
-            finally:
-                timer.cancel()
         result = (await self._request_many([(name, frame0)], timeout))[0]
         if isinstance(result, BaseException):
             raise result
@@ -263,7 +230,7 @@ class Connection:
             self._check_stalled(len(items[0][1]), sent_nothing=True)
         pendings: list[Pending[_Fut]] = []
         batch: list[Pending[_Fut]] = []
-        timer = loop.call_at(deadline, self._expire, pendings, timeout)
+        self._watch(loop, deadline)
         try:
             for name, frame0 in items:
                 if not session.fits(len(frame0)):
@@ -275,6 +242,7 @@ class Connection:
                 else:
                     self._check_open()
                 pending = session.register(name, frame0, loop.create_future(), timeout)
+                pending.deadline = deadline
                 pendings.append(pending)
                 batch.append(pending)
             self._send(batch)
@@ -288,8 +256,6 @@ class Connection:
             for p in pendings:
                 p.abandoned = True
             raise
-        finally:
-            timer.cancel()
         sent = len(pendings)
         pendings.clear()  # a raised error's traceback must not keep the futures alive
         for result in results:
@@ -334,15 +300,12 @@ class Connection:
         now = time.perf_counter()
         for p in batch:
             p.sent_at = now
-        self._last_activity = time.monotonic()
+        self._last_activity = time.perf_counter()
         transport.write(batch[0].frame if len(batch) == 1 else b"".join(p.frame for p in batch))
         batch.clear()
 
     def _check_open(self) -> None:
-        if self._closed_reason is not None:
-            raise KvpConnectionError(
-                f"connection to {self.endpoint} is closed: {self._closed_reason}"
-            )
+        super()._check_open()
         if self._transport is None:
             raise KvpConnectionError(f"not connected to {self.endpoint}")
 
@@ -351,7 +314,15 @@ class Connection:
     def _on_data(self, data: bytes) -> None:
         session = self.session
         try:
-            replies = self._decoder.feed_replies(data)
+            size = len(data)
+            if size >= 10 and not self._decoder.buffered:
+                msg_id, length, mode, n = _HEAD.unpack_from(data)
+                if length + 4 == size and n + 10 == size:  # one whole reply: the common case
+                    replies = [new_reply(msg_id, mode, data[7:-3], data[-1], data[-3:-1])]
+                else:
+                    replies = self._decoder.feed_replies(data)
+            else:
+                replies = self._decoder.feed_replies(data)
             now = time.perf_counter()
             for reply in replies:
                 pending, dropped = session.dispatch(reply)
@@ -368,16 +339,11 @@ class Connection:
         except ProtocolError as exc:
             self._abort(str(exc))
             return
-        self._last_activity = time.monotonic()
+        self._last_activity = now
         self._slot.set()
 
     def _on_lost(self, exc: Exception | None) -> None:
-        try:
-            self._decoder.eof()
-            reason = f"{self.endpoint} closed the connection" + (f": {exc}" if exc else "")
-        except ProtocolError:
-            reason = f"{self.endpoint} closed the connection in the middle of a reply"
-        self._fail_all(reason)
+        self._fail_all(self._eof_reason(exc))
 
     def _abort(self, problem: str) -> None:
         log.warning("protocol error from %s: %s; dropping the connection", self.endpoint, problem)
@@ -394,6 +360,9 @@ class Connection:
             _fail(p.waiter, KvpConnectionError(reason))
         self._slot.set()
         self._stop_keepalive()
+        if self._watchdog is not None:
+            self._watchdog.cancel()
+            self._watchdog = None
 
     def _stop_keepalive(self) -> None:
         task = self._keepalive_task
@@ -407,7 +376,7 @@ class Connection:
         assert self.keepalive
         interval = self.keepalive
         while self.is_open:
-            idle = time.monotonic() - self._last_activity
+            idle = time.perf_counter() - self._last_activity
             if idle < interval or self.session.queue:
                 await asyncio.sleep(max(interval - idle, interval / 10))
                 continue
@@ -421,14 +390,8 @@ class Connection:
     async def ping(self, *, timeout: float | None = None) -> float:
         """Round trip of a keep-alive request in seconds (``PING`` or, on old proxies, ``$OV_PRO``)."""
         start = time.perf_counter()
-        if self._ping_supported is not False:
-            reply = await self.read("PING", timeout=timeout)
-            if reply.ok and reply.value == b"PONG":
-                self._ping_supported = True
-                return time.perf_counter() - start
-            self._ping_supported = False
-            log.info(
-                "%s does not answer PING (pre-9.0 proxy); keeping alive with $OV_PRO", self.endpoint
-            )
-        await self.read("$OV_PRO", timeout=timeout)
+        name, frame = self._keepalive_frame()
+        if not self._keepalive_answered(name, await self._request(name, frame, timeout)):
+            name, frame = self._keepalive_frame()
+            await self._request(name, frame, timeout)
         return time.perf_counter() - start

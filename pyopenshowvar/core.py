@@ -29,7 +29,7 @@ from .errors import (
     WriteRefusedError,
 )
 from .krl import KrlValue, format_value, parse_value
-from .protocol import Reply
+from .protocol import Reply, encode_read
 from .session import IdPolicy
 from .stats import AccessStats
 
@@ -37,6 +37,8 @@ __all__ = ["ClientCore", "Op", "ReadResult", "as_async_method", "as_sync_method"
 
 P = ParamSpec("P")
 T = TypeVar("T")
+
+_READ_FRAMES_MAX = 256
 
 #: A call an operation asks its client to make: (method name, positional args, keyword args).
 Call = tuple[str, tuple[Any, ...], dict[str, Any]]
@@ -100,6 +102,8 @@ class ClientCore:
         }
         self._stats = AccessStats()
         self._sync_lock = threading.Lock()  # the blocking client's connect() (threads)
+        #: read requests by name (id 0): a control loop reads the same few names again and again
+        self._read_frames: dict[str, bytes] = {}
         #: how many times a lost or stalled connection was replaced
         self.reconnects = 0
 
@@ -127,6 +131,12 @@ class ClientCore:
                 f"{exc} (auto_reconnect is off: call connect() to open a new connection)"
             ) from None
         raise KvpStalledError(f"{exc}; the next call reconnects") from None
+
+    def _read_frame(self, name: str) -> bytes:
+        frame = encode_read(0, name)
+        if len(self._read_frames) < _READ_FRAMES_MAX:
+            self._read_frames[name] = frame
+        return frame
 
     # ------------------------------------------------------------------ replies
 

@@ -52,6 +52,7 @@ class Pending(Generic[W]):
 
     __slots__ = (
         "abandoned",
+        "deadline",
         "frame",
         "mode",
         "msg_id",
@@ -72,23 +73,47 @@ class Pending(Generic[W]):
         self.sent_at = 0.0
         #: how long its caller waits (a reply later than this means the server is stalled)
         self.timeout = timeout
+        #: when its caller stops waiting, on the transport's clock (asyncio: loop time)
+        self.deadline = 0.0
         #: the caller gave up (timeout, cancellation); its reply is still expected and discarded
         self.abandoned = False
 
 
-def value_shape(value: bytes) -> str:
-    """A coarse class of a read's text that a variable keeps for life (type, not value)."""
-    first = value[:1]
-    if first == b"{":
+_NUMBER_START = frozenset(b"+-.0123456789")
+
+
+def value_shape(value: bytes) -> bytes:
+    """A coarse class of a (non-empty) read's text that a variable keeps for life: its type,
+    not its value (``b"{E6AXIS:"``, ``b'"'``, ``b"#"``, ``b"BOOL"``, ``b"number"``, ...)."""
+    first = value[0]
+    if first == 0x7B:  # "{": the struct's type name is part of its shape
         colon = value.find(b":", 1, 64)
-        return value[: colon + 1].decode("latin-1") if colon > 0 else "{"
-    if first in (b'"', b"'", b"#"):
-        return first.decode("latin-1")
-    if value in (b"TRUE", b"FALSE"):
-        return "BOOL"
-    if first in b"+-.0123456789" and first:
-        return "number"
-    return "other"
+        return value[: colon + 1] if colon > 0 else b"{"
+    if first in (0x22, 0x27, 0x23):  # '"', "'", "#"
+        return value[:1]
+    if first in _NUMBER_START:
+        return b"number"
+    if value == b"TRUE" or value == b"FALSE":
+        return b"BOOL"
+    return b"other"
+
+
+def new_reply(msg_id: int, mode: int | None, value: bytes, status: int, code: bytes) -> Reply:
+    """A :class:`Reply`, built through its slots: the frozen dataclass's ``__init__`` costs
+    several times more, which a serial read's round trip feels (clients' fast paths)."""
+    reply = _new(Reply)
+    _set_id(reply, msg_id)
+    _set_mode(reply, mode)
+    _set_value(reply, value)
+    _set_status(reply, status)
+    _set_code(reply, code)
+    return reply
+
+
+_new = object.__new__
+_set_id, _set_mode, _set_value, _set_status, _set_code = (
+    Reply.__dict__[field].__set__ for field in ("msg_id", "mode", "value", "status", "code")
+)
 
 
 def _write_value(frame: bytes) -> bytes:
@@ -122,7 +147,7 @@ class Session(Generic[W]):
         #: the wire id of the last reply matched (a legacy batch repeats it)
         self._last_label: int | None = None
         self._probe: tuple[Pending[W], Pending[W]] | None = None
-        self._shapes: dict[str, str] = {}
+        self._shapes: dict[str, bytes] = {}
         #: replies matched in order because they repeated their batch's label (legacy proxies)
         self.mislabeled_replies = 0
         #: requests the server never answered (detected when a later reply arrived)
@@ -168,6 +193,27 @@ class Session(Generic[W]):
                 return msg_id
         raise ProtocolError("no free message id")  # pragma: no cover - needs 65536 pending
 
+    def stamp_idle(self, frame0: bytes) -> bytes:
+        """``frame0`` with the next id, for a request on an idle connection (empty queue) that
+        a transport sends and matches itself; :meth:`answered_idle` or :meth:`register_sent`
+        must follow. The serial fast path: no queue, no index, no waiter."""
+        msg_id = self._next_id
+        self._next_id = (msg_id + 1) & MAX_ID
+        return msg_id.to_bytes(2, "big") + frame0[2:]
+
+    def answered_idle(self, name: str, frame: bytes, reply: Reply) -> None:
+        """``reply`` (whose id is ``frame``'s) answers the idle-path request: check it."""
+        self.check(name, frame, reply)
+        self._last_label = reply.msg_id
+
+    def register_sent(self, name: str, frame: bytes, waiter: W, timeout: float) -> Pending[W]:
+        """Queue an idle-path request after all (its reply did not come as expected)."""
+        pending = Pending(int.from_bytes(frame[:2], "big"), name, frame, waiter, timeout)
+        self.queue.append(pending)
+        self.by_id[pending.msg_id] = pending
+        self.bytes_in_flight += pending.size
+        return pending
+
     def register(self, name: str, frame0: bytes, waiter: W, timeout: float) -> Pending[W]:
         """Queue ``frame0`` (built with id 0) under a free id; ``pending.frame`` is what to send."""
         msg_id = self._alloc_id()
@@ -208,7 +254,7 @@ class Session(Generic[W]):
             while self.queue[0] is not pending:
                 dropped.append(self._finish(self.queue[0]))
             self.dropped_requests += len(dropped)
-        self._check(pending, reply)
+        self.check(pending.name, pending.frame, reply)
         if self._probe is not None and pending is self._probe[1]:
             if self.ids == "unknown":
                 self.ids = "echoed"
@@ -245,42 +291,45 @@ class Session(Generic[W]):
             )
         raise ProtocolError(f"reply with id {reply.msg_id} answers no request: {why}{hint}")
 
-    def _check(self, pending: Pending[W], reply: Reply) -> None:
-        mode = pending.mode
+    def check(self, name: str, frame: bytes, reply: Reply) -> None:
+        """What can be checked of ``reply`` against the request ``frame`` for ``name``: mode,
+        a write's echo (legacy proxies), a read's value shape. Raises :class:`ProtocolError`."""
+        mode = frame[4]
+        value = reply.value
+        if mode == reply.mode == Mode.READ:
+            if value and reply.status == 1:  # the common case first: a successful read
+                shape = value_shape(value)
+                known = self._shapes.get(name)
+                if known != shape:
+                    self._new_shape(name, shape, known, reply.msg_id)
+            return
         if reply.mode is None:
             if mode in (Mode.READ, Mode.WRITE):
                 raise ProtocolError(
-                    f"reply id {reply.msg_id} has no mode, but {pending.name!r} was a mode-{mode}"
-                    " request"
+                    f"reply id {reply.msg_id} has no mode, but {name!r} was a mode-{mode} request"
                 )
         elif reply.mode != mode:
             raise ProtocolError(
                 f"reply id {reply.msg_id} has mode {reply.mode}, but the request for"
-                f" {pending.name!r} had mode {mode}"
+                f" {name!r} had mode {mode}"
             )
-        legacy = self.ids == "legacy"
-        if legacy and mode == Mode.WRITE:
-            sent = _write_value(pending.frame)
-            if reply.value != sent and (reply.ok or reply.value):
+        if self.ids == "legacy" and mode == Mode.WRITE:
+            if value != _write_value(frame) and (reply.ok or value):
                 raise ProtocolError(
-                    f"reply id {reply.msg_id} does not echo the value written to {pending.name!r}"
+                    f"reply id {reply.msg_id} does not echo the value written to {name!r}"
                 )
-        elif mode == Mode.READ and reply.value and reply.status == 1:
-            self._check_shape(pending.name, reply)
 
-    def _check_shape(self, name: str, reply: Reply) -> None:
-        shape = value_shape(reply.value)
-        known = self._shapes.get(name)
-        if known is None:
-            if len(name) <= _SHAPE_NAME_MAX:
-                if len(self._shapes) >= _SHAPES_MAX:
-                    del self._shapes[next(iter(self._shapes))]  # the oldest entry
-                self._shapes[name] = shape
-        elif known != shape:
+    def _new_shape(self, name: str, shape: bytes, known: bytes | None, msg_id: int) -> None:
+        if known is not None:
             raise ProtocolError(
-                f"reply id {reply.msg_id} for {name!r} reads like {shape!r}, but that variable"
-                f" read like {known!r} before: a reply for another variable"
+                f"reply id {msg_id} for {name!r} reads like {shape.decode('latin-1')!r}, but that"
+                f" variable read like {known.decode('latin-1')!r} before: a reply for another"
+                " variable"
             )
+        if len(name) <= _SHAPE_NAME_MAX:
+            if len(self._shapes) >= _SHAPES_MAX:
+                del self._shapes[next(iter(self._shapes))]  # the oldest entry
+            self._shapes[name] = shape
 
     def _finish(self, pending: Pending[W]) -> Pending[W]:
         if self.queue and self.queue[0] is pending:

@@ -67,7 +67,7 @@ class Client(SyncRobotHelpers, ClientCore):
             was_connected = self._conn is not None
             conn = BlockingConnection(self.host, self.port, **self._conn_kw)
             conn.connect(self.connect_timeout)
-            conn.stats = self._stats  # one statistics object survives reconnects
+            conn.use_stats(self._stats)  # one statistics object survives reconnects
             self._conn = conn
             if was_connected:
                 self.reconnects += 1
@@ -127,7 +127,14 @@ class Client(SyncRobotHelpers, ClientCore):
     def read(self, name: str, *, timeout: float | None = None) -> str:
         """Read ``name`` and return the proxy's text (raises ``UnknownVariableError`` for
         KVP's empty-value-with-success answer, ``ReadFailedError`` for a failure status)."""
-        return self._check_read(name, self._request(name, encode_read(0, name), timeout))
+        frame0 = self._read_frames.get(name) or self._read_frame(name)
+        conn = self._conn
+        if conn is not None and conn.is_open:  # the hot path, without the retry wrapper
+            try:
+                return self._check_read(name, conn.request(name, frame0, timeout))
+            except KvpStalledError as exc:
+                self._may_retry(exc)
+        return self._check_read(name, self._request(name, frame0, timeout))
 
     def read_value(
         self, name: str, type_name: str | None = None, *, timeout: float | None = None
