@@ -236,3 +236,15 @@ def test_works_on_uvloop(emulator_thread: Any) -> None:
             return await kvp.read("$OV_PRO")
 
     assert uvloop.run(main()) == "100"
+
+
+def test_run_uses_uvloop_when_installed(emulator_thread: Any) -> None:
+    pytest.importorskip("uvloop")
+    from pyopenshowvar import run
+
+    async def main() -> tuple[str, str]:
+        async with Client("127.0.0.1", emulator_thread.port) as kvp:
+            return type(asyncio.get_running_loop()).__module__, await kvp.read("$OV_PRO")
+
+    module, value = run(main())
+    assert module.startswith("uvloop") and value == "100"
