@@ -66,7 +66,7 @@ class BlockingConnection(LinkBase[_Outcome]):
             sock = socket.create_connection((self.host, self.port), timeout=timeout)
         except OSError as exc:  # TimeoutError included
             raise self._connect_error(exc, timeout) from exc
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self._connected(sock)
         sock.settimeout(None)  # blocking; the kernel timeouts below bound every call
         self._sock = sock
         self._last_activity = time.perf_counter()
@@ -91,6 +91,8 @@ class BlockingConnection(LinkBase[_Outcome]):
         timeout = self.timeout if timeout is None else timeout
         with self.lock:
             session = self.session
+            if len(frame0) > session.pipeline_bytes:
+                session.check_size(name, frame0)
             sock = self._sock
             if (
                 sock is None
@@ -165,6 +167,8 @@ class BlockingConnection(LinkBase[_Outcome]):
         timeout = self.timeout if timeout is None else timeout
         with self.lock:
             session = self.session
+            for name, frame0 in items:  # refuse before anything is sent
+                session.check_size(name, frame0)
             self._check_open()
             deadline = time.perf_counter() + timeout
             pendings: list[Pending[_Outcome]] = []

@@ -6,9 +6,9 @@ real proxy behaves (protocol reference §1.4, §2.5, §2.6):
 
 * **Each request is one ``transport.write``** with TCP_NODELAY, because KVP does not reassemble
   a request cut across two TCP reads.
-* **Pipelining is bounded** by a request count and by the bytes of unanswered requests
-  (default 2048, the size of KVP's single ``Read``), so a burst can never be cut at the proxy's
-  buffer boundary.
+* **Pipelining is bounded** by a request count and by the bytes of unanswered requests: at most
+  ``pipeline_bytes`` and one TCP segment (see :mod:`pyopenshowvar.session`); a request larger
+  than ``pipeline_bytes`` is refused with :class:`ProtocolError` before anything is sent.
 * **Timeouts never desynchronise.** A timed-out request keeps its place in the queue, marked
   abandoned; its late reply is recognised and discarded.
 * **A stalled server is reported.** When timed-out requests fill the window, the connection is
@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import socket
 import struct
 import time
 from collections.abc import Callable
@@ -104,9 +103,7 @@ class Connection(LinkBase[_Fut]):
                 )
         except OSError as exc:  # TimeoutError included
             raise self._connect_error(exc, timeout) from exc
-        sock = transport.get_extra_info("socket")
-        if sock is not None:
-            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self._connected(transport.get_extra_info("socket"))
         # No isinstance check on the transport: uvloop's transports are not asyncio.Transport
         # subclasses, and only the interface matters.
         self._transport = transport
@@ -191,6 +188,8 @@ class Connection(LinkBase[_Fut]):
             # Fast path of request_many for one request on an idle connection (the serial
             # control-loop case): same registration, deadline, send and outcome, less overhead.
             timeout = self.timeout if timeout is None else timeout
+            if len(frame0) > session.pipeline_bytes:
+                session.check_size(name, frame0)
             loop = asyncio.get_running_loop()
             pending = session.register(name, frame0, loop.create_future(), timeout)
             pending.deadline = deadline = loop.time() + timeout
@@ -223,9 +222,11 @@ class Connection(LinkBase[_Fut]):
         self, items: list[tuple[str, bytes]], timeout: float | None
     ) -> list[Reply | KvpError]:
         timeout = self.timeout if timeout is None else timeout
+        session = self.session
+        for name, frame0 in items:  # refuse before anything is sent
+            session.check_size(name, frame0)
         loop = asyncio.get_running_loop()
         deadline = loop.time() + timeout
-        session = self.session
         if items:
             self._check_stalled(len(items[0][1]), sent_nothing=True)
         pendings: list[Pending[_Fut]] = []

@@ -8,6 +8,7 @@ same way: how a failed connect is reported, and which keep-alive request an old 
 from __future__ import annotations
 
 import logging
+import socket
 import time
 from typing import Generic, TypeVar
 
@@ -86,6 +87,17 @@ class LinkBase(Generic[W]):
     def use_stats(self, stats: AccessStats) -> None:
         """Record into ``stats`` (the client keeps one object across reconnects)."""
         self.stats = stats
+
+    def _connected(self, sock: socket.socket | None) -> None:
+        """Socket options and the segment bound of a new connection (both transports)."""
+        if sock is None:
+            return
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        try:
+            mss = sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_MAXSEG)
+        except (OSError, AttributeError):
+            mss = 1460  # Ethernet, a KRC's KLI, where the OS does not tell
+        self.session.limit_to_segment(mss)
 
     def _connect_error(self, exc: OSError, timeout: float) -> KvpError:
         if isinstance(exc, TimeoutError):

@@ -12,13 +12,23 @@ The guarantee is that a reply is never handed to a request it does not answer:
   every pending call fails loudly. It is never taken as a value.
 * **In order** only for a proxy *proven* to have the pre-9.0 id bug (every reply to one socket
   read carries the id of the first request of that read). Under ``id_policy="auto"`` the proof
-  is a probe sent the first time two requests would be in flight: two reads in one segment on
-  an idle connection. Both answered with their own ids: the proxy echoes ids, and by-id matching
-  stays. The second answered with the first's id: the bug is proven. Even then only a reply
+  is a probe sent as soon as a connection opens, while it is quiet: two reads of ``$OV_PRO`` in
+  one segment, whose replies nobody waits for (connecting costs no round trip). Both answered
+  with their own ids: the proxy echoes ids, and by-id matching stays for the connection's life.
+  The second answered with the first's id: the bug is proven. Until then ids are matched
+  strictly. Even on a proven legacy proxy only a reply
   that repeats the id of the reply just before it (the batch's label) is matched to the oldest
   request, and what can be checked is checked: the reply's mode against the request's, a write's
   echo against the value sent, and a read's value shape against what that variable read before.
 * ``id_policy="strict"`` declares ids echoed without a probe; ``"legacy"`` declares the bug.
+
+The in-flight window is bounded by a request count and by the bytes of unanswered requests:
+at most ``pipeline_bytes`` (2048, the size of KVP's single ``Read``) and at most one TCP segment
+of the path (:meth:`Session.limit_to_segment`, with the MSS read at connect time). KVP parses
+every socket read on its own and a read ends wherever the segments received so far end; while
+everything unanswered fits in one segment, no read can end inside a request. A request larger
+than ``pipeline_bytes`` could never arrive in one read and is refused (:meth:`Session.check_size`)
+before anything is sent.
 """
 
 from __future__ import annotations
@@ -138,6 +148,8 @@ class Session(Generic[W]):
         self.endpoint = endpoint
         self.max_in_flight = max(1, max_in_flight)
         self.pipeline_bytes = max(1, pipeline_bytes)
+        #: the unanswered-bytes bound in force: pipeline_bytes, lowered to the path's MSS
+        self.window = self.pipeline_bytes
         self.id_policy: IdPolicy = id_policy
         self.ids: IdState = {"auto": "unknown", "strict": "echoed"}.get(id_policy, "legacy")  # type: ignore[assignment]
         self.queue: deque[Pending[W]] = deque()
@@ -160,13 +172,22 @@ class Session(Generic[W]):
         """True until ids are known to be echoed or proven legacy (``auto`` only)."""
         return self.ids == "unknown"
 
+    def limit_to_segment(self, mss: int) -> None:
+        """Keep unanswered bytes within one TCP segment of ``mss`` bytes (see the module doc)."""
+        self.window = min(self.pipeline_bytes, max(1, mss))
+
+    def check_size(self, name: str, frame: bytes) -> None:
+        """Refuse a request KVP would cut (larger than one of its reads), before sending."""
+        if len(frame) > self.pipeline_bytes:
+            raise ProtocolError(
+                f"request for {name!r} is {len(frame)} bytes; KUKAVARPROXY reads at most "
+                f"{self.pipeline_bytes} per socket event and would cut it (see pipeline_bytes)"
+            )
+
     def fits(self, size: int) -> bool:
         if not self.queue:
-            return True  # a lone request always goes, whatever its size
-        return (
-            len(self.queue) < self.max_in_flight
-            and self.bytes_in_flight + size <= self.pipeline_bytes
-        )
+            return True  # a lone request always goes (check_size bounded it)
+        return len(self.queue) < self.max_in_flight and self.bytes_in_flight + size <= self.window
 
     def stalled(self, size: int, now: float) -> bool:
         """No room, and the oldest request waits for longer than its timeout: the server has

@@ -189,3 +189,17 @@ def test_stalled_server_is_reported_and_replaced() -> None:
                 with pytest.raises(KvpTimeoutError):
                     kvp.read(f"S{i}")
             assert kvp.read("AFTER", timeout=1.0) == "v:AFTER" and kvp.reconnects == 1
+
+
+def test_against_the_wire_faithful_kvp9_emulator() -> None:
+    # --wire kvp9 parses every 2048-byte read alone: a burst cut at a read boundary would lose
+    # or garble requests, and a request over 2048 bytes would be cut
+    config = TEST_CONFIG.__class__(**{**TEST_CONFIG.__dict__, "wire": "kvp9", "robot": False})
+    with EmulatorThread(config) as emu, sync.Client("127.0.0.1", emu.port, timeout=5.0) as kvp:
+        names = [f"MYE6ARRAY[{i}]" for i in range(1, 201)]
+        kvp.write_many([(n, f"{{A1 {i}.5}}") for i, n in enumerate(names, 1)])
+        res = kvp.read_many(names, typed=True)
+        assert [res[n].unwrap().a1 for n in names] == [i + 0.5 for i in range(1, 201)]
+        with pytest.raises(pyopenshowvar.ProtocolError, match="2048"):
+            kvp.write("MYSTRING[]", '"' + "x" * 2100 + '"')
+        assert kvp.read("$OV_PRO") == "100"
