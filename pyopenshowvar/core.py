@@ -30,7 +30,7 @@ from .errors import (
 )
 from .krl import KrlValue, format_value, parse_value
 from .protocol import Reply, encode_read
-from .session import IdPolicy
+from .session import IdPolicy, check_id_policy
 from .stats import AccessStats
 
 __all__ = ["ClientCore", "Op", "ReadResult", "as_async_method", "as_sync_method"]
@@ -84,8 +84,7 @@ class ClientCore:
         pipeline_bytes: int = 2048,
         id_policy: IdPolicy = "auto",
     ) -> None:
-        if id_policy not in ("auto", "strict", "legacy", "fifo"):
-            raise ValueError(f"id_policy must be 'auto', 'strict' or 'legacy', not {id_policy!r}")
+        check_id_policy(id_policy)  # at construction, not at the first connect
         if not timeout > 0:
             raise ValueError(f"timeout must be positive, not {timeout!r}")
         self.host = host

@@ -92,6 +92,11 @@ class Pending(Generic[W]):
 _NUMBER_START = frozenset(b"+-.0123456789")
 
 
+def check_id_policy(id_policy: str) -> None:
+    if id_policy not in ("auto", "strict", "legacy", "fifo"):
+        raise ValueError(f"id_policy must be 'auto', 'strict' or 'legacy', not {id_policy!r}")
+
+
 def value_shape(value: bytes) -> bytes:
     """A coarse class of a (non-empty) read's text that a variable keeps for life: its type,
     not its value (``b"{E6AXIS:"``, ``b'"'``, ``b"#"``, ``b"BOOL"``, ``b"number"``, ...)."""
@@ -143,8 +148,7 @@ class Session(Generic[W]):
         pipeline_bytes: int = 2048,
         id_policy: IdPolicy = "auto",
     ) -> None:
-        if id_policy not in ("auto", "strict", "legacy", "fifo"):
-            raise ValueError(f"id_policy must be 'auto', 'strict' or 'legacy', not {id_policy!r}")
+        check_id_policy(id_policy)
         self.endpoint = endpoint
         self.max_in_flight = max(1, max_in_flight)
         self.pipeline_bytes = max(1, pipeline_bytes)

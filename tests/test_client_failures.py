@@ -113,13 +113,12 @@ async def test_stalled_server_marks_the_connection_unhealthy() -> None:
 
 
 async def test_stalled_server_reconnects_with_auto_reconnect() -> None:
-    connections: list[int] = []
+    connections: list[asyncio.StreamWriter] = []  # the writers themselves: ids get reused
 
     async def on_read(reqs: list[Request], w: asyncio.StreamWriter) -> None:
-        key = id(w)
-        if key not in connections:
-            connections.append(key)
-        first = connections.index(key) == 0
+        if w not in connections:
+            connections.append(w)
+        first = connections[0] is w
         w.write(b"".join(answer(r) for r in reqs if r.name == "$OV_PRO" or not first))
 
     async with FakeProxy(on_read=on_read) as port:

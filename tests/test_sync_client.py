@@ -165,12 +165,12 @@ def test_unsolicited_reply_and_lost_connection_fail_loudly() -> None:
 
 
 def test_stalled_server_is_reported_and_replaced() -> None:
-    conns: list[int] = []
+    conns: list[asyncio.StreamWriter] = []  # the writers themselves: ids get reused
 
     async def on_read(reqs: list[Request], w: asyncio.StreamWriter) -> None:
-        if id(w) not in conns:
-            conns.append(id(w))
-        first = conns.index(id(w)) == 0
+        if w not in conns:
+            conns.append(w)
+        first = conns[0] is w
         w.write(b"".join(answer(r) for r in reqs if r.name == "$OV_PRO" or not first))
 
     with FakeProxy(on_read=on_read) as port:
