@@ -88,6 +88,15 @@ class BlockingConnection(LinkBase[_Outcome]):
 
     def request(self, name: str, frame0: bytes, timeout: float | None) -> Reply:
         """Send one request and wait for its reply (raises its error)."""
+        out = self._exchange(name, frame0, timeout, False)
+        assert isinstance(out, Reply)
+        return out
+
+    def _exchange(
+        self, name: str, frame0: bytes, timeout: float | None, value_only: bool
+    ) -> bytes | Reply:
+        """:meth:`request`; with ``value_only``, a successful read's non-empty value comes back
+        as its bytes (the serial fast path then builds no :class:`Reply`)."""
         timeout = self.timeout if timeout is None else timeout
         with self.lock:
             session = self.session
@@ -107,7 +116,9 @@ class BlockingConnection(LinkBase[_Outcome]):
             # control-loop hot path, hence written out rather than split into helpers.
             if self._sock_timeout != timeout:
                 self._fit_timeout(timeout)
-            frame = session.stamp_idle(frame0)
+            msg_id = session.next_id  # an idle connection: no id is pending
+            session.next_id = (msg_id + 1) & 0xFFFF
+            frame = msg_id.to_bytes(2, "big") + frame0[2:]
             self._last_activity = sent_at = time.perf_counter()
             try:
                 sock.sendall(frame)
@@ -121,9 +132,14 @@ class BlockingConnection(LinkBase[_Outcome]):
             if size >= 10 and data[:2] == frame[:2]:
                 msg_id, length, mode, n = _HEAD.unpack_from(data)
                 if length + 4 == size and n + 10 == size:
-                    reply = new_reply(msg_id, mode, data[7:-3], data[-1], data[-3:-1])
                     now = time.perf_counter()
                     try:
+                        if value_only and n and mode == 0 == frame[4] and data[-1] == 1:
+                            value = data[7:-3]  # a successful read: the common case
+                            session.answered_read(name, msg_id, value)
+                            self.stats.record(now - sent_at)
+                            return value
+                        reply = new_reply(msg_id, mode, data[7:-3], data[-1], data[-3:-1])
                         session.answered_idle(name, frame, reply)
                     except ProtocolError as exc:
                         self._protocol_error(exc)

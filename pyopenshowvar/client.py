@@ -134,6 +134,12 @@ class Client(RobotHelpers, ClientCore):
         :class:`ReadFailedError` for a failure status.
         """
         frame0 = self._read_frames.get(name) or self._read_frame(name)
+        conn = self._conn
+        if conn is not None and conn.is_open:  # the hot path, without the retry wrapper
+            try:
+                return self._check_read(name, await conn._request(name, frame0, timeout))
+            except KvpStalledError as exc:
+                self._may_retry(exc)
         return self._check_read(name, await self._request(name, frame0, timeout))
 
     async def read_value(

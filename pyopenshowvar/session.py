@@ -90,6 +90,8 @@ class Pending(Generic[W]):
 
 
 _NUMBER_START = frozenset(b"+-.0123456789")
+#: first bytes of the shapes that are literally a prefix of the text (struct type, quote, #)
+_PREFIX_SHAPES = frozenset(b"{\"'#")
 
 
 def check_id_policy(id_policy: str) -> None:
@@ -159,7 +161,8 @@ class Session(Generic[W]):
         self.queue: deque[Pending[W]] = deque()
         self.by_id: dict[int, Pending[W]] = {}
         self.bytes_in_flight = 0
-        self._next_id = 0
+        #: the next message id to try (ids still pending are skipped when allocating)
+        self.next_id = 0
         #: the wire id of the last reply matched (a legacy batch repeats it)
         self._last_label: int | None = None
         self._probe: tuple[Pending[W], Pending[W]] | None = None
@@ -212,27 +215,31 @@ class Session(Generic[W]):
     def _alloc_id(self) -> int:
         # Skip ids still pending (abandoned requests keep theirs until answered).
         for _ in range(MAX_ID + 1):
-            msg_id = self._next_id
-            self._next_id = (msg_id + 1) & MAX_ID
+            msg_id = self.next_id
+            self.next_id = (msg_id + 1) & MAX_ID
             if msg_id not in self.by_id:
                 return msg_id
         raise ProtocolError("no free message id")  # pragma: no cover - needs 65536 pending
 
-    def stamp_idle(self, frame0: bytes) -> bytes:
-        """``frame0`` with the next id, for a request on an idle connection (empty queue) that
-        a transport sends and matches itself; :meth:`answered_idle` or :meth:`register_sent`
-        must follow. The serial fast path: no queue, no index, no waiter."""
-        msg_id = self._next_id
-        self._next_id = (msg_id + 1) & MAX_ID
-        return msg_id.to_bytes(2, "big") + frame0[2:]
-
     def answered_idle(self, name: str, frame: bytes, reply: Reply) -> None:
-        """``reply`` (whose id is ``frame``'s) answers the idle-path request: check it."""
+        """``reply`` (whose id is ``frame``'s) answers a request sent on an idle connection
+        without being queued (the transports' serial fast path): check it."""
         self.check(name, frame, reply)
         self._last_label = reply.msg_id
 
+    def answered_read(self, name: str, msg_id: int, value: bytes) -> None:
+        """The idle-path read ``msg_id`` succeeded with non-empty ``value``: check its shape."""
+        self._last_label = msg_id
+        known = self._shapes.get(name)
+        if known is not None and known[0] in _PREFIX_SHAPES and value.startswith(known):
+            return  # a struct, string or enum shape is a prefix of the text: no need to classify
+        shape = value_shape(value)
+        if known != shape:
+            self._new_shape(name, shape, known, msg_id)
+
     def register_sent(self, name: str, frame: bytes, waiter: W, timeout: float) -> Pending[W]:
-        """Queue an idle-path request after all (its reply did not come as expected)."""
+        """Queue a request sent on the serial fast path after all (its reply did not come
+        whole and alone): from here on it is matched like any other."""
         pending = Pending(int.from_bytes(frame[:2], "big"), name, frame, waiter, timeout)
         self.queue.append(pending)
         self.by_id[pending.msg_id] = pending

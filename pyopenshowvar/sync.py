@@ -131,9 +131,13 @@ class Client(SyncRobotHelpers, ClientCore):
         conn = self._conn
         if conn is not None and conn.is_open:  # the hot path, without the retry wrapper
             try:
-                return self._check_read(name, conn.request(name, frame0, timeout))
+                out = conn._exchange(name, frame0, timeout, True)
             except KvpStalledError as exc:
                 self._may_retry(exc)
+            else:
+                if isinstance(out, bytes):
+                    return out.decode("latin-1")  # checked: success status, non-empty value
+                return self._check_read(name, out)
         return self._check_read(name, self._request(name, frame0, timeout))
 
     def read_value(

@@ -144,10 +144,10 @@ async def test_many_tasks_share_one_client(kvp: Client) -> None:
 
 async def test_id_wrap_against_the_emulator(kvp: Client) -> None:
     assert kvp.connection is not None
-    kvp.connection.session._next_id = 65530
+    kvp.connection.session.next_id = 65530
     results = await asyncio.gather(*(kvp.read("$OV_PRO") for _ in range(20)))
     assert results == ["100"] * 20
-    assert kvp.connection.session._next_id == 14
+    assert kvp.connection.session.next_id == 14
 
 
 async def test_joint_path_handshake(kvp: Client, emulator: Any) -> None:

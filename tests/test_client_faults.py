@@ -211,7 +211,7 @@ async def test_id_wrap_and_skip_pending_ids() -> None:
     async with broken_server(handler) as port, Client(port=port) as kvp:
         conn = kvp.connection
         assert conn is not None
-        conn.session._next_id = 65534
+        conn.session.next_id = 65534
         ids = [int(await kvp.read("ID")) for _ in range(4)]
         assert ids == [65534, 65535, 0, 1]
 
