@@ -6,6 +6,7 @@ import asyncio
 import inspect
 import threading
 import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -29,9 +30,13 @@ from pyopenshowvar.testing import FakeProxy, answer
 HOME = "{E6AXIS: A1 0.0, A2 -90.0000, A3 90.0000, A4 0.0, A5 0.0, A6 0.0, E1 0.0, E2 0.0, E3 0.0, E4 0.0, E5 0.0, E6 0.0}"
 
 
+#: exact KRC4 texts are compared: the ideal plant (measured = set-point)
+IDEAL = replace(TEST_CONFIG, plant="ideal")
+
+
 @pytest.fixture(scope="module")
 def emu() -> Any:
-    with EmulatorThread(TEST_CONFIG) as emu:
+    with EmulatorThread(IDEAL) as emu:
         yield emu
 
 
@@ -121,7 +126,7 @@ async def test_works_inside_a_running_event_loop(emu: Any) -> None:
 
 
 def test_legacy_proxy_is_proven_and_matched_in_order() -> None:
-    config = TEST_CONFIG.__class__(**{**TEST_CONFIG.__dict__, "quirks": frozenset({"legacy-ids"})})
+    config = replace(IDEAL, quirks=frozenset({"legacy-ids"}))
     with EmulatorThread(config) as emu, sync.Client("127.0.0.1", emu.port) as kvp:
         names = [f"OUTPUT_VARS[{i}]" for i in range(1, 17)] * 3
         res = kvp.read_many(names)
@@ -194,7 +199,7 @@ def test_stalled_server_is_reported_and_replaced() -> None:
 def test_against_the_wire_faithful_kvp9_emulator() -> None:
     # --wire kvp9 parses every 2048-byte read alone: a burst cut at a read boundary would lose
     # or garble requests, and a request over 2048 bytes would be cut
-    config = TEST_CONFIG.__class__(**{**TEST_CONFIG.__dict__, "wire": "kvp9", "robot": False})
+    config = replace(IDEAL, wire="kvp9", robot=False)
     with EmulatorThread(config) as emu, sync.Client("127.0.0.1", emu.port, timeout=5.0) as kvp:
         names = [f"MYE6ARRAY[{i}]" for i in range(1, 201)]
         kvp.write_many([(n, f"{{A1 {i}.5}}") for i, n in enumerate(names, 1)])

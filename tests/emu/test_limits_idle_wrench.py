@@ -44,7 +44,7 @@ def test_every_lower_and_upper_software_limit_is_enforced(axis: int) -> None:
 
 
 async def test_lower_limit_stops_the_program_over_kvp(emulator_factory: EmulatorFactory) -> None:
-    emu = await emulator_factory(speed=20.0)
+    emu = await emulator_factory(speed=20.0, plant="ideal")  # exact texts: the ideal plant
     async with Client("127.0.0.1", emu.port) as kvp:
         await kvp.write("MYAXIS", "{A3 -121.0}")  # $SOFTN_END[3] = -120
         for _ in range(200):
@@ -89,7 +89,8 @@ def _tcp_jacobian_numeric(q_deg: np.ndarray, tool: tuple[float, ...]) -> np.ndar
 async def test_wrench_torques_use_the_tool(emulator_factory: EmulatorFactory) -> None:
     tool = (30.0, -20.0, 244.0, -90.0, 0.0, 180.0)
     force = np.array([25.0, -10.0, 40.0])  # N at the TCP, no moment
-    emu = await emulator_factory(speed=20.0)
+    # the ideal plant: statics torques exactly (the dynamic plant adds servo and sensor noise)
+    emu = await emulator_factory(speed=20.0, plant="ideal")
     async with Client("127.0.0.1", emu.port) as kvp:
         await kvp.write("$TOOL", Frame.from_numpy(np.asarray(tool)))
         await kvp.write("MYAXIS", "{A5 30.0}")  # the default program follows MYAXIS: SAFE
