@@ -1,0 +1,170 @@
+"""What the control server knows about the platform and the robot: fits, prediction, delay.
+
+* :class:`RecentFit` — a least-squares quadratic through the last ``window`` seconds of samples
+  of one signal: its value, rate and acceleration at any time near now, with far less noise than
+  a difference quotient and no lag for waves (a sine is locally quadratic).
+* :class:`PlatformEstimator` — heave from the PLC (Modbus), roll and pitch from the accelerometer
+  (or from the PLC: ``attitude="plc"``); :meth:`~PlatformEstimator.pose_at` evaluates the fits at
+  any time, so the same call gives the pose "now" (for x_c, eq. 4.14) and the pose predicted for
+  when a command will have been executed (the feed-forward). The board's low-pass delays its
+  angles by about 1/(2π·f_c); the estimator shifts them back by that much.
+* :class:`LagEstimator` — how long the robot takes to realise a command (KVP write, the KRL
+  advance run, interpolation, servo): the shift that best aligns the measured base-frame flange
+  positions with the commanded ones, re-estimated every half second while the robot moves.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+from .geometry import FloatArray, PlatformPose
+
+__all__ = ["LagEstimator", "PlatformEstimator", "RecentFit"]
+
+
+class RecentFit:
+    """Quadratic least-squares fit of (t, x) samples from the last ``window`` seconds."""
+
+    def __init__(self, window: float = 0.25, max_samples: int = 256) -> None:
+        self.window = window
+        self._t: deque[float] = deque(maxlen=max_samples)
+        self._x: deque[float] = deque(maxlen=max_samples)
+        self._coef: FloatArray | None = None
+        self._t_ref = 0.0
+
+    def add(self, t: float, x: float) -> None:
+        if self._t and t <= self._t[-1]:
+            return  # a repeated sample (the PLC had not scanned since the last read)
+        self._t.append(t)
+        self._x.append(x)
+        while self._t and self._t[0] < t - self.window:
+            self._t.popleft()
+            self._x.popleft()
+        self._coef = None
+
+    @property
+    def ready(self) -> bool:
+        return len(self._t) >= 1
+
+    @property
+    def last_time(self) -> float:
+        return self._t[-1] if self._t else -math.inf
+
+    def _fit(self) -> FloatArray:
+        if self._coef is None:
+            t = np.fromiter(self._t, float)
+            x = np.fromiter(self._x, float)
+            self._t_ref = float(t[-1])
+            degree = min(2, len(t) - 1)
+            if degree <= 0 or float(t[-1] - t[0]) < 1e-6:
+                self._coef = np.array([0.0, 0.0, float(x[-1])])
+            else:
+                coef = np.polyfit(t - self._t_ref, x, degree)
+                self._coef = np.concatenate([np.zeros(3 - len(coef)), coef])
+        return self._coef
+
+    def at(self, t: float) -> float:
+        """The fitted value at ``t`` (extrapolated past the last sample)."""
+        if not self._t:
+            return 0.0
+        a, b, c = self._fit()
+        h = t - self._t_ref
+        return float(a * h * h + b * h + c)
+
+    def rate(self, t: float) -> float:
+        if not self._t:
+            return 0.0
+        a, b, _ = self._fit()
+        return float(2.0 * a * (t - self._t_ref) + b)
+
+
+class PlatformEstimator:
+    """Heave, roll and pitch of the platform from the PLC and the accelerometer stream."""
+
+    def __init__(
+        self, *, attitude: str = "accel", window: float = 0.25, accel_lag: float = 0.0
+    ) -> None:
+        if attitude not in ("accel", "plc"):
+            raise ValueError("attitude must be 'accel' (the thesis' accelerometer) or 'plc'")
+        self.attitude = attitude
+        self.accel_lag = accel_lag
+        self.z = RecentFit(window)
+        self.phi = RecentFit(window)
+        self.theta = RecentFit(window)
+
+    def add_plc(self, t: float, z: float, phi: float, theta: float) -> None:
+        self.z.add(t, z)
+        if self.attitude == "plc":
+            self.phi.add(t, phi)
+            self.theta.add(t, theta)
+
+    def add_accel(self, t: float, roll: float, pitch: float) -> None:
+        if self.attitude == "accel":
+            self.phi.add(t - self.accel_lag, roll)
+            self.theta.add(t - self.accel_lag, pitch)
+
+    @property
+    def ready(self) -> bool:
+        return self.z.ready and self.phi.ready and self.theta.ready
+
+    def pose_at(self, t: float) -> PlatformPose:
+        return PlatformPose(self.z.at(t), self.phi.at(t), self.theta.at(t))
+
+    def age(self, now: float) -> float:
+        """Seconds since the oldest of the three signals was last sampled."""
+        return now - min(self.z.last_time, self.phi.last_time, self.theta.last_time)
+
+
+class LagEstimator:
+    """Delay (s) between commanded and measured base-frame flange positions."""
+
+    def __init__(
+        self,
+        initial: float = 0.05,
+        *,
+        window: float = 2.0,
+        max_lag: float = 0.4,
+        step: float = 0.004,
+        min_motion: float = 1.0,
+        smoothing: float = 0.3,
+    ) -> None:
+        self.value = initial
+        self.window, self.max_lag, self.step = window, max_lag, step
+        self.min_motion, self.smoothing = min_motion, smoothing
+        self._cmd: deque[tuple[float, FloatArray]] = deque(maxlen=4096)
+        self._meas: deque[tuple[float, FloatArray]] = deque(maxlen=4096)
+        self._next = 0.0
+        self.updates = 0
+
+    def command(self, t: float, xyz: FloatArray) -> None:
+        self._cmd.append((t, np.asarray(xyz, float)))
+
+    def measured(self, t: float, xyz: FloatArray) -> None:
+        self._meas.append((t, np.asarray(xyz, float)))
+        if t >= self._next:
+            self._next = t + 0.5
+            self._update(t)
+
+    def _update(self, now: float) -> None:
+        horizon = now - self.window
+        cmd = [(t, x) for t, x in self._cmd if t >= horizon - self.max_lag]
+        meas = [(t, x) for t, x in self._meas if t >= horizon]
+        if len(cmd) < 20 or len(meas) < 20:
+            return
+        tc = np.array([t for t, _ in cmd])
+        xc = np.stack([x for _, x in cmd])
+        tm = np.array([t for t, _ in meas])
+        xm = np.stack([x for _, x in meas])
+        if float(np.max(np.ptp(xc, axis=0))) < self.min_motion:
+            return  # the robot barely moved: nothing to learn from
+        lags = np.arange(0.0, self.max_lag + 1e-9, self.step)
+        shifted = tm[None, :] - lags[:, None]  # (L, M)
+        err = np.zeros(len(lags))
+        for k in range(3):
+            err += np.mean((np.interp(shifted, tc, xc[:, k]) - xm[None, :, k]) ** 2, axis=1)
+        best = float(lags[int(np.argmin(err))])
+        self.value += self.smoothing * (best - self.value)
+        self.updates += 1
