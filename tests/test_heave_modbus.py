@@ -1,0 +1,76 @@
+"""The platform PLC read and written by a stock Modbus TCP client (pymodbus), over real TCP."""
+
+from __future__ import annotations
+
+import asyncio
+
+import pytest
+from pymodbus.client import AsyncModbusTcpClient
+
+from pyopenshowvar_apps.heave import registers as reg
+from pyopenshowvar_apps.heave.geometry import PlatformPose
+from pyopenshowvar_apps.heave.master import PlatformClient, PlatformError
+from pyopenshowvar_apps.heave.simulator import PlatformConfig, PlatformSimulator
+
+
+async def test_stock_client_drives_the_platform() -> None:
+    async with PlatformSimulator(PlatformConfig(port=0, accel=False)) as sim:
+        client = AsyncModbusTcpClient("127.0.0.1", port=sim.port, timeout=2, retries=0)
+        assert await client.connect()
+        try:
+            state = reg.decode_state((await client.read_input_registers(0, count=17)).registers)
+            assert state.heave == 0.0 and state.status == 0 and not state.flag("enabled")
+            assert (await client.write_coil(reg.COILS["ENABLE"], True)).isError() is False
+            assert (await client.read_coils(0, count=2)).bits[:2] == [True, False]
+            words = [reg.to_register(40.0, reg.SCALE_MM), reg.to_register(1.5, reg.SCALE_DEG),
+                     reg.to_register(-2.0, reg.SCALE_DEG)]  # fmt: skip
+            assert not (await client.write_registers(0, words)).isError()
+            assert (await client.read_holding_registers(0, count=3)).registers == words
+            for _ in range(100):  # the motors take their time (speed/acceleration limits)
+                await asyncio.sleep(0.05)
+                await client.write_register(reg.HOLDING["HEARTBEAT"], 1)
+                state = reg.decode_state((await client.read_input_registers(0, count=17)).registers)
+                if not state.flag("moving") and state.heave > 39:
+                    break
+            assert (state.heave, state.roll, state.pitch) == pytest.approx((40.0, 1.5, -2.0), abs=0.02)
+            assert state.flag("enabled") and state.fault == 0 and state.time > 0.5
+            # the same state mirrored into holding registers 100.. for holding-only masters
+            mirror = reg.decode_state((await client.read_holding_registers(100, count=17)).registers)
+            assert mirror.heave == state.heave and mirror.beta == state.beta
+            bits = (await client.read_discrete_inputs(0, count=6)).bits
+            assert bits[reg.STATUS["enabled"]] is True
+            # out-of-range value: refused as a whole (exception 3), the old set-point stays
+            bad = await client.write_registers(0, [words[0], reg.to_register(25.0, reg.SCALE_DEG)])
+            assert bad.isError() and bad.exception_code == 3
+            assert (await client.read_holding_registers(0, count=3)).registers == words
+            assert (await client.write_register(reg.HOLDING["MODE"], 7)).exception_code == 3
+            # the state block is read-only; unknown addresses are refused
+            assert (await client.write_register(105, 1)).exception_code == 2
+            assert (await client.read_holding_registers(20, count=2)).isError()
+            # the watchdog: no master write for 0.2 s stops the drives with fault 1
+            await client.write_register(reg.HOLDING["WATCHDOG"], 200)
+            await asyncio.sleep(0.5)
+            state = reg.decode_state((await client.read_input_registers(0, count=17)).registers)
+            assert state.fault == reg.FAULT_WATCHDOG and not state.flag("enabled")
+            await client.write_coil(reg.COILS["RESET"], True)
+            assert (await client.read_coils(2, count=1)).bits[0] is False
+        finally:
+            client.close()
+        assert sim.refused >= 3
+
+
+async def test_platform_client_units_and_errors() -> None:
+    async with PlatformSimulator(PlatformConfig(port=0, accel=False)) as sim:
+        async with PlatformClient("127.0.0.1", sim.port, timeout=2.0) as plc:
+            await plc.configure(watchdog=0.5, speed=100)
+            await plc.enable(True)
+            await plc.set_pose(PlatformPose(-20.0, 0.5, 0.25))
+            assert sim.plc.sp_pose == PlatformPose(-20.0, 0.5, 0.25)
+            with pytest.raises(ValueError, match="outside the register range"):
+                await plc.set_pose(PlatformPose(200.0, 0.0, 0.0))
+            with pytest.raises(PlatformError, match="exception 3"):
+                await plc.configure(speed=0)
+            state = await plc.read_state()
+            assert state.flag("enabled")
+    with pytest.raises(ConnectionError, match="cannot connect"):
+        await PlatformClient("127.0.0.1", sim.port, timeout=0.5).connect()
