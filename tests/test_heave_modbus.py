@@ -6,7 +6,6 @@ import asyncio
 
 import pytest
 from pymodbus.client import AsyncModbusTcpClient
-
 from pyopenshowvar_apps.heave import registers as reg
 from pyopenshowvar_apps.heave.geometry import PlatformPose
 from pyopenshowvar_apps.heave.master import PlatformClient, PlatformError
@@ -32,10 +31,14 @@ async def test_stock_client_drives_the_platform() -> None:
                 state = reg.decode_state((await client.read_input_registers(0, count=17)).registers)
                 if not state.flag("moving") and state.heave > 39:
                     break
-            assert (state.heave, state.roll, state.pitch) == pytest.approx((40.0, 1.5, -2.0), abs=0.02)
+            assert (state.heave, state.roll, state.pitch) == pytest.approx(
+                (40.0, 1.5, -2.0), abs=0.02
+            )
             assert state.flag("enabled") and state.fault == 0 and state.time > 0.5
             # the same state mirrored into holding registers 100.. for holding-only masters
-            mirror = reg.decode_state((await client.read_holding_registers(100, count=17)).registers)
+            mirror = reg.decode_state(
+                (await client.read_holding_registers(100, count=17)).registers
+            )
             assert mirror.heave == state.heave and mirror.beta == state.beta
             bits = (await client.read_discrete_inputs(0, count=6)).bits
             assert bits[reg.STATUS["enabled"]] is True

@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
 from pyopenshowvar_apps.heave.accel import MAX_LINE, AccelFirmware, AccelReader, parse_line
 from pyopenshowvar_apps.heave.geometry import THESIS_PLATFORM as G
 from pyopenshowvar_apps.heave.geometry import PlatformPose, UnreachablePose, platform_matrix

@@ -107,6 +107,13 @@ def _optional(
     return runner
 
 
+def _heave(out: Path, speed: float, quick: bool) -> CaseResult:
+    # its own embedded rig (emulator + platform simulator), always in real time
+    from pyopenshowvar_apps.heave.demo import demo_case
+
+    return demo_case(out, speed, quick)
+
+
 #: (sub-folder, title, runner) in the thesis' order.
 CASE_STUDIES: list[tuple[str, str, Callable[[Path, float, bool], CaseResult]]] = [
     ("linefollow", "line following", _line_following),
@@ -127,6 +134,7 @@ CASE_STUDIES: list[tuple[str, str, Callable[[Path, float, bool], CaseResult]]] =
             "pyopenshowvar_apps.casestudies.haptic", "run_haptic", "actuator", "haptic feedback"
         ),
     ),
+    ("heave", "heave compensation", _heave),
 ]
 
 
@@ -170,7 +178,7 @@ def demo(
     ] = False,
     only: Annotated[
         list[str] | None,
-        typer.Option("--only", help="Run only these: linefollow, teleop, haptic."),
+        typer.Option("--only", help="Run only these: linefollow, teleop, haptic, heave."),
     ] = None,
     plant: Annotated[
         str,

@@ -70,7 +70,12 @@ class AccelFirmware:
     """Sensor + the board's filter: feed the true motion, get the angles it would send."""
 
     def __init__(
-        self, *, noise: float = 0.01, cutoff: float = 5.0, rate: float = 100.0, seed: int | None = None
+        self,
+        *,
+        noise: float = 0.01,
+        cutoff: float = 5.0,
+        rate: float = 100.0,
+        seed: int | None = None,
     ) -> None:
         if not (noise >= 0 and cutoff > 0 and rate > 0):
             raise ValueError("noise >= 0, cutoff > 0 and rate > 0 are required")
@@ -79,7 +84,9 @@ class AccelFirmware:
         self._rng = np.random.default_rng(seed)
         self._filtered: np.ndarray[Any, np.dtype[np.float64]] | None = None
 
-    def raw(self, pose: PlatformPose, heave_accel_mm_s2: float = 0.0) -> np.ndarray[Any, np.dtype[np.float64]]:
+    def raw(
+        self, pose: PlatformPose, heave_accel_mm_s2: float = 0.0
+    ) -> np.ndarray[Any, np.dtype[np.float64]]:
         """Specific force in the sensor's axes (g), with noise."""
         phi, theta = math.radians(pose.phi), math.radians(pose.theta)
         up = 1.0 + heave_accel_mm_s2 / 1000.0 / G  # world-vertical specific force, g
@@ -112,7 +119,6 @@ class AccelReader:
         self.on_sample: Callable[[AccelSample], None] | None = None
         self.received = 0
         self.rejected = 0
-        self.skipped = 0
         self._buffer = bytearray()
         self._serial: Any = None
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -132,7 +138,9 @@ class AccelReader:
             await asyncio.wait_for(self._changed.wait(), timeout)
         except TimeoutError:
             self.close()
-            raise TimeoutError(f"no accelerometer line from {self.port} within {timeout} s") from None
+            raise TimeoutError(
+                f"no accelerometer line from {self.port} within {timeout} s"
+            ) from None
         return self
 
     def close(self) -> None:
@@ -165,7 +173,7 @@ class AccelReader:
             self.rejected += 1
             rest = b""
         self._buffer = bytearray(rest)
-        for line in lines[-8:]:  # a backlog is stale anyway: parse only the newest few
+        for line in lines:  # at most one read (4 kB) of lines: bounded work per event
             try:
                 millis, roll, pitch = parse_line(line)
             except ValueError:
@@ -175,6 +183,5 @@ class AccelReader:
             self.received += 1
             if self.on_sample is not None:
                 self.on_sample(self.latest)
-        self.skipped += max(0, len(lines) - 8)
         if lines:
             self._changed.set()

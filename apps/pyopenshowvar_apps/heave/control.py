@@ -41,12 +41,19 @@ import numpy.typing as npt
 
 from pyopenshowvar.kinematics import KR6R900SIXX, fk_matrix, inv_transform, matrix_to_frame
 
-from .estimation import LagEstimator, PlatformEstimator
+from .estimation import ClockMapper, LagEstimator, PlatformEstimator
 from .geometry import FloatArray, PlatformPose, platform_matrix
 from .operator import OperatorInput, ScriptedOperator, hands_off
 from .waves import WaveGenerator
 
-__all__ = ["TARGET_VARIABLE", "ControlConfig", "ControlLaw", "ControlServer", "Smoother", "VectorPID"]
+__all__ = [
+    "TARGET_VARIABLE",
+    "ControlConfig",
+    "ControlLaw",
+    "ControlServer",
+    "Smoother",
+    "VectorPID",
+]
 
 log = logging.getLogger(__name__)
 MODEL = KR6R900SIXX
@@ -61,8 +68,8 @@ class ControlConfig:
 
     #: eq. 4.15 scale: set-point speed (mm/s) at full stick.
     k: float = 100.0
-    kp: float = 0.3
-    ki: float = 0.6
+    kp: float = 0.2
+    ki: float = 0.3
     kd: float = 0.0
     #: Largest PID correction (mm).
     pid_limit: float = 20.0
@@ -77,6 +84,8 @@ class ControlConfig:
     #: Command delay (s) to predict the platform over; None: measured on line.
     lead: float | None = None
     initial_lead: float = 0.05
+    #: The prediction never reaches further ahead than this (s): beyond it a fit is a guess.
+    max_lead: float = 0.25
     #: "accel": roll/pitch from the accelerometer (thesis); "plc": from the PLC's registers.
     attitude: str = "accel"
     #: The accelerometer board's low-pass cut-off (Hz), to undo its delay.
@@ -112,7 +121,9 @@ class VectorPID:
 class Smoother:
     """Speed- and acceleration-limited tracking of a target vector (time-optimal braking)."""
 
-    def __init__(self, initial: npt.ArrayLike, max_speed: npt.ArrayLike, max_accel: npt.ArrayLike) -> None:
+    def __init__(
+        self, initial: npt.ArrayLike, max_speed: npt.ArrayLike, max_accel: npt.ArrayLike
+    ) -> None:
         self.state = np.array(initial, dtype=np.float64)
         self.speed = np.zeros_like(self.state)
         self.vmax = np.broadcast_to(np.asarray(max_speed, float), self.state.shape).copy()
@@ -136,7 +147,9 @@ def _wrap180(deg: FloatArray) -> FloatArray:
 class ControlLaw:
     """One control step at a time (no I/O): see the module docstring, steps 1–5."""
 
-    def __init__(self, config: ControlConfig, theta0: npt.ArrayLike, mount: FloatArray | None = None) -> None:
+    def __init__(
+        self, config: ControlConfig, theta0: npt.ArrayLike, mount: FloatArray | None = None
+    ) -> None:
         self.config = config
         self.mount = np.eye(4) if mount is None else np.asarray(mount, float)
         base_flange = fk_matrix(MODEL, np.asarray(theta0, float))
@@ -224,6 +237,7 @@ class ControlServer:
             attitude=cfg.attitude, accel_lag=1.0 / (2.0 * math.pi * cfg.accel_cutoff)
         )
         self.lag = LagEstimator(cfg.initial_lead if cfg.lead is None else cfg.lead)
+        self.plc_clock, self.accel_clock = ClockMapper(), ClockMapper()
         self.law: ControlLaw | None = None
         self.rows: deque[dict[str, float]] = deque(maxlen=max_rows)
         self.platform_rows: deque[dict[str, float]] = deque(maxlen=max_rows)
@@ -233,6 +247,7 @@ class ControlServer:
         self.error: BaseException | None = None
         self._tasks: list[asyncio.Task[None]] = []
         self._first_state = asyncio.Event()
+        self._stopping = False
 
     # --- life cycle ------------------------------------------------------------------------------
     async def wait_robot_ready(self, timeout: float = 15.0) -> FloatArray:
@@ -252,7 +267,7 @@ class ControlServer:
         self.law = ControlLaw(self.config, theta0, self.mount)
         self.wave_t0 = time.monotonic() if wave_t0 is None else wave_t0
         if self.accel is not None:
-            self.accel.on_sample = lambda s: self.estimator.add_accel(s.received, s.roll, s.pitch)
+            self.accel.on_sample = self._on_accel
         loop = asyncio.get_running_loop()
         self._tasks = [loop.create_task(self._guard(self._platform_task()), name="platform")]
         await asyncio.wait_for(self._first_state.wait(), 5.0)
@@ -263,7 +278,12 @@ class ControlServer:
             loop.create_task(self._guard(self._operator_task()), name="operator"),
         ]
 
-    async def stop(self) -> None:
+    async def stop(self, timeout: float = 3.0) -> None:
+        """Let the I/O tasks finish their request in flight (a request cancelled half-way would
+        leave its late answer to confuse the next one), then cancel whatever still runs."""
+        self._stopping = True
+        if self._tasks:
+            await asyncio.wait(self._tasks, timeout=timeout)
         for task in self._tasks:
             task.cancel()
         for task in self._tasks:
@@ -282,6 +302,10 @@ class ControlServer:
         if self.law is not None:
             self.law.compensate = on
             log.info("compensation %s", "on" if on else "off")
+
+    def _on_accel(self, sample: Any) -> None:
+        t = self.accel_clock.to_local(sample.millis / 1000.0, sample.received)
+        self.estimator.add_accel(t, sample.roll, sample.pitch)
 
     async def _guard(self, coro: Any) -> None:
         try:
@@ -304,7 +328,7 @@ class ControlServer:
     async def _platform_task(self) -> None:
         period = self.config.platform_period
         next_beat = 0.0
-        while True:
+        while not self._stopping:
             t0 = time.monotonic()
             if self.waves is not None:
                 await self.platform.set_pose(self.waves.pose(t0 - self.wave_t0))
@@ -312,7 +336,7 @@ class ControlServer:
                 await self.platform.heartbeat()
                 next_beat = t0 + 0.25
             state = await self.platform.read_state()
-            t = time.monotonic()
+            t = self.plc_clock.to_local(state.time, time.monotonic())
             self.estimator.add_plc(t, state.heave, state.roll, state.pitch)
             self.platform_rows.append(
                 {"t": t, "heave": state.heave, "roll": state.roll, "pitch": state.pitch,
@@ -323,7 +347,7 @@ class ControlServer:
             await asyncio.sleep(max(0.0, period - (time.monotonic() - t0)))
 
     async def _operator_task(self) -> None:
-        while True:
+        while not self._stopping:
             cmd = self.operator.poll(time.monotonic())
             self.stick = cmd.stick
             if cmd.toggle:
@@ -337,7 +361,7 @@ class ControlServer:
         law, kvp = self.law, self.kvp
         target = law.base0.copy()
         theta_a, t_prev = theta0, time.monotonic()
-        while True:
+        while not self._stopping:
             t_send = time.monotonic()
             _, theta = await asyncio.gather(
                 kvp.write(TARGET_VARIABLE, frame_text(target)), kvp.read_joint_angles()
@@ -352,7 +376,7 @@ class ControlServer:
     def _control_step(self, t: float, dt: float, theta_a: FloatArray) -> FloatArray:
         assert self.law is not None
         law, cfg = self.law, self.config
-        lead = cfg.lead if cfg.lead is not None else self.lag.value
+        lead = min(cfg.lead if cfg.lead is not None else self.lag.value, cfg.max_lead)
         now = self.estimator.pose_at(t)
         pred = self.estimator.pose_at(t + lead)
         target = law.step(dt, theta_a, now, pred, self.stick)

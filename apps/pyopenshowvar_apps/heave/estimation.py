@@ -22,13 +22,38 @@ import numpy as np
 
 from .geometry import FloatArray, PlatformPose
 
-__all__ = ["LagEstimator", "PlatformEstimator", "RecentFit"]
+__all__ = ["ClockMapper", "LagEstimator", "PlatformEstimator", "RecentFit"]
+
+
+class ClockMapper:
+    """Maps a device's own clock (the PLC's TIME_MS, the board's millis()) onto ours.
+
+    Samples reach us late by a varying amount (a busy network, USB packets, a starved process);
+    the least-delayed sample seen fixes the offset, and the offset may creep up by ``drift``
+    (s/s) so two clocks running at slightly different rates stay matched. The sample then
+    counts at the moment it was taken, not when it arrived, so a burst of late samples still
+    draws the right curve.
+    """
+
+    def __init__(self, drift: float = 2e-4) -> None:
+        self.drift = drift
+        self.offset: float | None = None
+        self._last = 0.0
+
+    def to_local(self, remote: float, received: float) -> float:
+        candidate = received - remote
+        if self.offset is None or remote < self._last - 1.0:  # first sample, or a restart
+            self.offset = candidate
+        else:
+            self.offset = min(self.offset + self.drift * max(remote - self._last, 0.0), candidate)
+        self._last = remote
+        return remote + self.offset
 
 
 class RecentFit:
     """Quadratic least-squares fit of (t, x) samples from the last ``window`` seconds."""
 
-    def __init__(self, window: float = 0.25, max_samples: int = 256) -> None:
+    def __init__(self, window: float = 0.4, max_samples: int = 256) -> None:
         self.window = window
         self._t: deque[float] = deque(maxlen=max_samples)
         self._x: deque[float] = deque(maxlen=max_samples)
@@ -62,7 +87,9 @@ class RecentFit:
             if degree <= 0 or float(t[-1] - t[0]) < 1e-6:
                 self._coef = np.array([0.0, 0.0, float(x[-1])])
             else:
-                coef = np.polyfit(t - self._t_ref, x, degree)
+                h = t - self._t_ref
+                design = np.vander(h, degree + 1)  # columns h², h, 1 (or h, 1)
+                coef = np.linalg.lstsq(design, x, rcond=None)[0]
                 self._coef = np.concatenate([np.zeros(3 - len(coef)), coef])
         return self._coef
 
@@ -85,7 +112,7 @@ class PlatformEstimator:
     """Heave, roll and pitch of the platform from the PLC and the accelerometer stream."""
 
     def __init__(
-        self, *, attitude: str = "accel", window: float = 0.25, accel_lag: float = 0.0
+        self, *, attitude: str = "accel", window: float = 0.4, accel_lag: float = 0.0
     ) -> None:
         if attitude not in ("accel", "plc"):
             raise ValueError("attitude must be 'accel' (the thesis' accelerometer) or 'plc'")
@@ -126,7 +153,7 @@ class LagEstimator:
         initial: float = 0.05,
         *,
         window: float = 2.0,
-        max_lag: float = 0.4,
+        max_lag: float = 0.3,
         step: float = 0.004,
         min_motion: float = 1.0,
         smoothing: float = 0.3,

@@ -39,7 +39,7 @@ from .geometry import FloatArray, PlatformPose, platform_matrix
 from .operator import OperatorInput
 from .waves import WaveGenerator
 
-__all__ = ["PROGRAM", "EmbeddedRig", "GroundTruth", "HeaveResult", "HeavePlan", "analyse", "run_heave"]
+__all__ = ["PROGRAM", "GroundTruth", "HeavePlan", "HeaveResult", "analyse", "run_heave"]
 
 #: The KRL program the robot runs (its .dat beside it).
 PROGRAM = Path(__file__).with_name("krl") / "heave.src"
@@ -60,9 +60,12 @@ class HeavePlan:
     park: bool = True
 
     @classmethod
-    def thesis(cls, seed: int = 19, *, periods: int = 2, frequency: float = 0.1, **kw: Any) -> HeavePlan:
+    def thesis(
+        cls, seed: int = 19, *, periods: int = 2, frequency: float = 0.1, **kw: Any
+    ) -> HeavePlan:
         """The hardest thesis sea (see :meth:`WaveGenerator.thesis_max`), whole periods."""
-        waves = WaveGenerator.thesis_max(seed, frequency=frequency, ramp=kw.pop("ramp", 2.0))
+        ramp = kw.pop("ramp", min(2.0, 0.25 / frequency))
+        waves = WaveGenerator.thesis_max(seed, frequency=frequency, ramp=ramp)
         span = periods / frequency
         return cls(waves, off=span, on=span, **kw)
 
@@ -75,7 +78,10 @@ class GroundTruth:
     """
 
     def __init__(
-        self, robot_axes: Callable[[], FloatArray], mount: FloatArray | None = None, max_rows: int = 400_000
+        self,
+        robot_axes: Callable[[], FloatArray],
+        mount: FloatArray | None = None,
+        max_rows: int = 400_000,
     ) -> None:
         self.robot_axes = robot_axes
         self.mount = np.eye(4) if mount is None else np.asarray(mount, float)
@@ -83,13 +89,10 @@ class GroundTruth:
         self.q0: FloatArray | None = None
 
     def __call__(self, sim: Any) -> None:
-        t = time.monotonic()
+        # raw numbers only: this runs on every PLC scan; the kinematics run once, batched, later
         pose: PlatformPose = sim.pose
-        q = np.asarray(self.robot_axes(), float)
-        plate = platform_matrix(pose) @ self.mount
-        world = (plate @ fk_matrix(MODEL, q))[:3, 3]
-        still = (plate @ fk_matrix(MODEL, q if self.q0 is None else self.q0))[:3, 3]
-        self.rows.append((t, *world, *still, pose.z, pose.phi, pose.theta, *q))
+        q = self.robot_axes()
+        self.rows.append((time.monotonic(), pose.z, pose.phi, pose.theta, *(float(v) for v in q)))
 
     COLUMNS = (
         "t", "world_x", "world_y", "world_z", "still_x", "still_y", "still_z",
@@ -97,7 +100,20 @@ class GroundTruth:
     )  # fmt: skip
 
     def array(self) -> FloatArray:
-        return np.array(list(self.rows), dtype=np.float64).reshape(-1, len(self.COLUMNS))
+        """One row per scan, :attr:`COLUMNS`: the flange's world position, where it would be had
+        the robot stood still on ``q0``, the platform's true pose and the robot's axes."""
+        raw = np.array(list(self.rows), dtype=np.float64).reshape(-1, 10)
+        poses = [PlatformPose(*r[1:4]) for r in raw]
+        plates = (
+            np.stack([platform_matrix(p) @ self.mount for p in poses])
+            if len(raw)
+            else np.zeros((0, 4, 4))
+        )
+        world = np.einsum("nij,nj->ni", plates, fk_matrix(MODEL, raw[:, 4:10])[:, :, 3])[:, :3]
+        q0 = raw[0, 4:10] if self.q0 is None and len(raw) else self.q0
+        still_flange = fk_matrix(MODEL, q0)[:, 3] if q0 is not None else np.zeros(4)
+        still = (plates @ still_flange)[:, :3]
+        return np.column_stack([raw[:, :1], world, still, raw[:, 1:4], raw[:, 4:10]])
 
 
 @dataclass
@@ -108,7 +124,9 @@ class HeaveResult:
     series: dict[str, FloatArray] = field(default_factory=dict, repr=False)
 
     def as_json(self) -> dict[str, Any]:
-        out: dict[str, Any] = {k: (round(v, 4) if math.isfinite(v) else None) for k, v in self.metrics.items()}
+        out: dict[str, Any] = {
+            k: (round(v, 4) if math.isfinite(v) else None) for k, v in self.metrics.items()
+        }
         out.update(self.info)
         out["files"] = [str(p) for p in self.files]
         return out
@@ -230,13 +248,22 @@ def analyse(
     info: dict[str, Any] = {
         "ground_truth": data is not None,
         "measured_by": source,
-        "windows_s": {"off": float(phases["switch"] - phases["off_start"]), "on": float(phases["end"] - phases["on_start"])},
+        "windows_s": {
+            "off": float(phases["switch"] - phases["off_start"]),
+            "on": float(phases["end"] - phases["on_start"]),
+        },
         "waves": server.waves.describe() if server.waves is not None else {},
         "kvp_access_ms": {k: round(float(v), 3) for k, v in dict(stats).items()} if stats else {},
         "lag_updates": server.lag.updates,
         "attitude": server.config.attitude,
     }
-    series = {"t": t - phases["t0"], "world": world, "x_s": x_s, "err": err, "comp": comp.astype(float)}
+    series = {
+        "t": t - phases["t0"],
+        "world": world,
+        "x_s": x_s,
+        "err": err,
+        "comp": comp.astype(float),
+    }
     if data is not None:
         series["truth"] = data
     return HeaveResult(m, info, series=series)

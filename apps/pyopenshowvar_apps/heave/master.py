@@ -25,7 +25,9 @@ class PlatformError(RuntimeError):
 class PlatformClient:
     """``async with PlatformClient(host, port) as plc: await plc.read_state()``."""
 
-    def __init__(self, host: str, port: int = 5020, *, timeout: float = 1.0, device_id: int = 1) -> None:
+    def __init__(
+        self, host: str, port: int = 5020, *, timeout: float = 1.0, device_id: int = 1
+    ) -> None:
         self.host, self.port, self.timeout, self.device_id = host, port, timeout, device_id
         self._client: Any = None
         self._heartbeat = 0
@@ -86,7 +88,9 @@ class PlatformClient:
 
     async def configure(self, *, watchdog: float = 1.0, speed: int = 100, mode: int = 0) -> None:
         await self._call("mode write", "write_register", reg.HOLDING["MODE"], mode)
-        await self._call("watchdog write", "write_register", reg.HOLDING["WATCHDOG"], round(watchdog * 1000))
+        await self._call(
+            "watchdog write", "write_register", reg.HOLDING["WATCHDOG"], round(watchdog * 1000)
+        )
         await self._call("speed write", "write_register", reg.HOLDING["SPEED"], speed)
 
     async def heartbeat(self) -> None:
@@ -102,5 +106,7 @@ class PlatformClient:
     async def wave(self, on: bool, seed: int | None = None) -> None:
         """The PLC's own wave generator (stand-alone mode)."""
         if seed is not None:
-            await self._call("seed write", "write_register", reg.HOLDING["WAVE_SEED"], seed & 0xFFFF)
+            await self._call(
+                "seed write", "write_register", reg.HOLDING["WAVE_SEED"], seed & 0xFFFF
+            )
         await self._call("wave", "write_coil", reg.COILS["WAVE"], on)

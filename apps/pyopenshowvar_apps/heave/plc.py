@@ -170,6 +170,7 @@ class PlatformPLC:
 
     def state_words(self) -> list[int]:
         """The 17 input registers (see :mod:`.registers`)."""
+
         def word(value: float, scale: float) -> int:
             raw = max(-32768, min(32767, round(value / scale)))
             return raw & 0xFFFF
@@ -201,7 +202,9 @@ class PlatformPLC:
 
     def apply_commands(self, words: list[int]) -> None:
         """Take a full, validated holding block (raw words) as the new commands."""
-        signed = [int(reg.from_register(w)) if i not in reg.UNSIGNED else w for i, w in enumerate(words)]
+        signed = [
+            int(reg.from_register(w)) if i not in reg.UNSIGNED else w for i, w in enumerate(words)
+        ]
         self.sp_pose = PlatformPose(
             signed[0] * reg.SCALE_MM, signed[1] * reg.SCALE_DEG, signed[2] * reg.SCALE_DEG
         )

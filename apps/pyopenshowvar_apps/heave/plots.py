@@ -13,7 +13,9 @@ from .experiment import AXES, GroundTruth, HeaveResult
 __all__ = ["write_outputs"]
 
 
-def write_outputs(result: HeaveResult, server: Any, phases: dict[str, float], folder: Path, *, plots: bool = True) -> None:
+def write_outputs(
+    result: HeaveResult, server: Any, phases: dict[str, float], folder: Path, *, plots: bool = True
+) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     s = result.series
     t0 = phases["t0"]
@@ -60,7 +62,9 @@ def _fig_4_24(result: HeaveResult, phases: dict[str, float], folder: Path) -> Pa
     return save_figure(fig, folder / "fig4_24_end_effector.png")
 
 
-def _platform_plot(result: HeaveResult, plat: list[dict[str, float]], control: list[dict[str, float]], folder: Path) -> Path:
+def _platform_plot(
+    result: HeaveResult, plat: list[dict[str, float]], control: list[dict[str, float]], folder: Path
+) -> Path:
     s = result.series
     fig, axes = new_figure(4, 1, figsize=(9, 10), sharex=True)
     tp = np.array([r["t"] for r in plat])

@@ -119,11 +119,17 @@ async def run_session(
             raise ValueError("the accelerometer's serial port is needed (or use --attitude plc)")
         accel = await AccelReader(accel_port).open()
     try:
-        async with Client(*kvp_address, timeout=timeout) as kvp, PlatformClient(*modbus_address, timeout=timeout) as plc:
+        async with (
+            Client(*kvp_address, timeout=timeout) as kvp,
+            PlatformClient(*modbus_address, timeout=timeout) as plc,
+        ):
             server, phases = await run_heave(kvp, plc, accel, plan, truth=truth, on_phase=on_phase)
             result = analyse(server, phases, truth)
             if accel is not None:
-                result.info["accel_lines"] = {"received": accel.received, "rejected": accel.rejected}
+                result.info["accel_lines"] = {
+                    "received": accel.received,
+                    "rejected": accel.rejected,
+                }
             if out_dir is not None:
                 write_outputs(result, server, phases, Path(out_dir), plots=plots)
             return result

@@ -81,6 +81,7 @@ class PlatformSimulator:
         self._tasks: list[asyncio.Task[None]] = []
         self._pty: tuple[int, int] | None = None
         self._t0 = 0.0
+        self._t0_loop = 0.0
 
     # --- ground truth ----------------------------------------------------------------------------
     @property
@@ -117,10 +118,16 @@ class PlatformSimulator:
             self._open_pty()
         self._t0 = time.monotonic()
         loop = asyncio.get_running_loop()
+        self._t0_loop = loop.time()
         self._tasks.append(loop.create_task(self._scan_loop(), name="plc-scan"))
         if self._pty is not None:
             self._tasks.append(loop.create_task(self._accel_loop(), name="accel-stream"))
-        log.info("wave platform PLC on Modbus TCP %s:%d, accelerometer on %s", self.host, self.port, self.accel_path)
+        log.info(
+            "wave platform PLC on Modbus TCP %s:%d, accelerometer on %s",
+            self.host,
+            self.port,
+            self.accel_path,
+        )
         return self
 
     async def close(self) -> None:
@@ -147,19 +154,23 @@ class PlatformSimulator:
 
     # --- PLC scans ---------------------------------------------------------------------------------
     async def _scan_loop(self) -> None:
+        # A PLC's scan time varies and its clock is wall time: each scan steps by the time that
+        # really passed (at most 50 ms, so a stalled machine does not make the motors jump).
         scan = self.config.scan
         loop = asyncio.get_running_loop()
-        start = loop.time()
+        start = last = loop.time()
         n = 0
         while True:
             n += 1
-            due = start + n * scan
-            delay = due - loop.time()
+            delay = start + n * scan - loop.time()
             if delay > 0:
                 await asyncio.sleep(delay)
-            elif delay < -0.25:  # far behind (a stalled machine): re-base, do not fast-forward
+            elif delay < -0.25:  # far behind: re-base the schedule instead of catching up
                 start, n = loop.time(), 0
-            self.plc.step(scan)
+            now = loop.time()
+            self.plc.step(min(now - last, 0.05))
+            self.plc.time = now - self._t0_loop
+            last = now
             for callback in self.on_scan:
                 callback(self)
 
@@ -189,8 +200,11 @@ class PlatformSimulator:
             delay = start + n * period - loop.time()
             if delay > 0:
                 await asyncio.sleep(delay)
+            elif delay < -0.25:  # far behind: the board does not send a backlog
+                start, n = loop.time(), 0
             roll, pitch = self.firmware.sample(self.plc.pose, self.plc.heave_accel)
-            line = format_line(int(self.plc.time * 1000.0), roll, pitch)
+            millis = int((loop.time() - self._t0_loop) * 1000.0)  # the board's own clock
+            line = format_line(millis, roll, pitch)
             try:
                 os.write(master, line)
             except BlockingIOError:
@@ -255,9 +269,8 @@ class PlatformSimulator:
             plc.apply_commands(words)
             words = plc.command_words()
         registers[: reg.HOLDING_COUNT] = words
-        if values is not None:  # pymodbus copies the request values in after us
-            for i, value in enumerate(values):
-                values[i] = words[address + i]  # type: ignore[call-overload]
+        if values is not None:  # pymodbus stores the request's values after us: make them ours
+            values[:] = words[address : address + len(values)]  # type: ignore[assignment]
         return None
 
     def _coil(self, index: int, on: bool) -> None:

@@ -81,7 +81,10 @@ class WaveGenerator:
             amplitude = float(rng.uniform(*THESIS_RANGES[name]))
             f, phase = shared
             if not coherent:
-                f, phase = float(rng.uniform(*THESIS_FREQUENCY)), float(rng.uniform(-math.pi, math.pi))
+                f, phase = (
+                    float(rng.uniform(*THESIS_FREQUENCY)),
+                    float(rng.uniform(-math.pi, math.pi)),
+                )
             rows.append(WaveComponent(amplitude, f, phase))
         return cls(*rows, ramp=ramp, geometry=geometry)
 
@@ -99,7 +102,9 @@ class WaveGenerator:
         every row at ``frequency``, random phases (seeded)."""
         rng = np.random.default_rng(seed)
         rows = [
-            WaveComponent(scale * THESIS_RANGES[name][1], frequency, float(rng.uniform(-math.pi, math.pi)))
+            WaveComponent(
+                scale * THESIS_RANGES[name][1], frequency, float(rng.uniform(-math.pi, math.pi))
+            )
             for name in ROWS
         ]
         return cls(*rows, ramp=ramp, geometry=geometry)
