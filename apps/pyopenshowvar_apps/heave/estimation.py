@@ -152,7 +152,7 @@ class LagEstimator:
         self,
         initial: float = 0.05,
         *,
-        window: float = 2.0,
+        window: float = 3.0,
         max_lag: float = 0.3,
         step: float = 0.004,
         min_motion: float = 1.0,
@@ -179,7 +179,7 @@ class LagEstimator:
         horizon = now - self.window
         cmd = [(t, x) for t, x in self._cmd if t >= horizon - self.max_lag]
         meas = [(t, x) for t, x in self._meas if t >= horizon]
-        if len(cmd) < 20 or len(meas) < 20:
+        if len(cmd) < 8 or len(meas) < 8:
             return
         tc = np.array([t for t, _ in cmd])
         xc = np.stack([x for _, x in cmd])

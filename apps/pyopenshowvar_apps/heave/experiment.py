@@ -32,9 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from pyopenshowvar.kinematics import fk_matrix
-
-from .control import MODEL, ControlConfig, ControlServer
+from .control import ControlConfig, ControlServer
 from .geometry import FloatArray, PlatformPose, platform_matrix
 from .operator import OperatorInput
 from .waves import WaveGenerator
@@ -73,26 +71,31 @@ class HeavePlan:
 class GroundTruth:
     """World pose of the flange from the simulators' state, one sample per PLC scan.
 
-    ``robot_axes`` returns the simulated robot's axes (deg) at the moment of the call; it runs on
-    the platform simulator's thread (see :meth:`attach`).
+    ``robot_state`` returns the simulated robot's axes (deg) and its flange pose in the robot's
+    base frame (4×4, mm) as the simulator knows them, at the moment of the call; it runs on the
+    platform simulator's thread (every PLC scan).
     """
 
     def __init__(
         self,
-        robot_axes: Callable[[], FloatArray],
+        robot_state: Callable[[], tuple[FloatArray, FloatArray]],
         mount: FloatArray | None = None,
         max_rows: int = 400_000,
     ) -> None:
-        self.robot_axes = robot_axes
+        self.robot_state = robot_state
         self.mount = np.eye(4) if mount is None else np.asarray(mount, float)
         self.rows: deque[tuple[float, ...]] = deque(maxlen=max_rows)
-        self.q0: FloatArray | None = None
+        #: The flange pose (base frame) the robot stood on at the start: the "no robot motion"
+        #: reference of what the platform alone does to the flange.
+        self.flange0: FloatArray | None = None
 
     def __call__(self, sim: Any) -> None:
-        # raw numbers only: this runs on every PLC scan; the kinematics run once, batched, later
+        # raw numbers only (this runs on every PLC scan); the transforms run batched, later
         pose: PlatformPose = sim.pose
-        q = self.robot_axes()
-        self.rows.append((time.monotonic(), pose.z, pose.phi, pose.theta, *(float(v) for v in q)))
+        q, flange = self.robot_state()
+        self.rows.append(
+            (time.monotonic(), pose.z, pose.phi, pose.theta, *q, *np.asarray(flange)[:3].ravel())
+        )
 
     COLUMNS = (
         "t", "world_x", "world_y", "world_z", "still_x", "still_y", "still_z",
@@ -101,18 +104,16 @@ class GroundTruth:
 
     def array(self) -> FloatArray:
         """One row per scan, :attr:`COLUMNS`: the flange's world position, where it would be had
-        the robot stood still on ``q0``, the platform's true pose and the robot's axes."""
-        raw = np.array(list(self.rows), dtype=np.float64).reshape(-1, 10)
-        poses = [PlatformPose(*r[1:4]) for r in raw]
-        plates = (
-            np.stack([platform_matrix(p) @ self.mount for p in poses])
-            if len(raw)
-            else np.zeros((0, 4, 4))
-        )
-        world = np.einsum("nij,nj->ni", plates, fk_matrix(MODEL, raw[:, 4:10])[:, :, 3])[:, :3]
-        q0 = raw[0, 4:10] if self.q0 is None and len(raw) else self.q0
-        still_flange = fk_matrix(MODEL, q0)[:, 3] if q0 is not None else np.zeros(4)
-        still = (plates @ still_flange)[:, :3]
+        the robot stood still on ``flange0``, the platform's true pose and the robot's axes."""
+        raw = np.array(list(self.rows), dtype=np.float64).reshape(-1, 22)
+        plates = np.array([platform_matrix(PlatformPose(*r[1:4])) @ self.mount for r in raw])
+        plates = plates.reshape(-1, 4, 4)
+        flange_xyz1 = np.column_stack([raw[:, 10:22].reshape(-1, 3, 4)[:, :, 3], np.ones(len(raw))])
+        world = np.einsum("nij,nj->ni", plates, flange_xyz1)[:, :3]
+        f0 = self.flange0 if self.flange0 is not None else (
+            np.vstack([raw[0, 10:22].reshape(3, 4), [0, 0, 0, 1]]) if len(raw) else np.eye(4)
+        )  # fmt: skip
+        still = (plates @ np.asarray(f0)[:, 3])[:, :3]
         return np.column_stack([raw[:, :1], world, still, raw[:, 1:4], raw[:, 4:10]])
 
 
@@ -163,7 +164,7 @@ async def run_heave(
     )
     await server.start()
     if truth is not None:
-        truth.q0 = np.asarray(await kvp.read_joint_angles(), float)
+        truth.flange0 = truth.robot_state()[1]
     t0 = server.wave_t0
     phases = {"t0": t0, "off_start": t0 + plan.waves.ramp}
     try:

@@ -16,7 +16,10 @@ from typing import Any, Self
 
 import numpy as np
 
+from pyopenshowvar.kinematics import fk_matrix
+
 from .accel import AccelReader
+from .control import MODEL
 from .experiment import PROGRAM, GroundTruth, HeavePlan, HeaveResult, analyse, run_heave
 from .geometry import FloatArray
 from .master import PlatformClient
@@ -24,15 +27,22 @@ from .plc import MotorLimits
 from .plots import write_outputs
 from .simulator import PlatformConfig, PlatformThread
 
-__all__ = ["EmbeddedRig", "robot_axes", "run_session"]
+__all__ = ["EmbeddedRig", "robot_state", "run_session"]
 
 
-def robot_axes(emulator: Any) -> FloatArray:
-    """The simulated robot's actual axes (deg) from the emulator's own state, not a variable."""
+def robot_state(emulator: Any) -> tuple[FloatArray, FloatArray]:
+    """The simulated robot's axes (deg) and flange pose in its base frame (4×4) from the
+    emulator's own state, never from a variable the controller publishes: the physical robot's
+    ground truth when the emulator runs a plant (``robot.plant.truth``), else the interpolator's
+    axes (the ideal plant, where the robot is exactly where it is commanded)."""
     robot = emulator.robot
     if robot is None:
         raise RuntimeError("the emulator runs without a robot")
-    return np.asarray(robot.q, dtype=np.float64)
+    truth = getattr(getattr(robot, "plant", None), "truth", None)
+    if truth is not None:
+        return np.asarray(truth.q, dtype=np.float64), np.asarray(truth.flange, dtype=np.float64)
+    q = np.asarray(robot.q, dtype=np.float64)
+    return q, fk_matrix(MODEL, q)
 
 
 class EmbeddedRig:
@@ -66,7 +76,7 @@ class EmbeddedRig:
         try:
             self.platform = PlatformThread(self.platform_config).start()
             emu = self.emulator.emulator
-            self.truth = GroundTruth(lambda: robot_axes(emu), self.mount)
+            self.truth = GroundTruth(lambda: robot_state(emu), self.mount)
             truth = self.truth
             self.platform.call(lambda sim: sim.on_scan.append(truth))
         except BaseException:
