@@ -377,8 +377,8 @@ class ControlServer:
         assert self.law is not None
         law, cfg = self.law, self.config
         lead = min(cfg.lead if cfg.lead is not None else self.lag.value, cfg.max_lead)
-        now = self.estimator.pose_at(t)
-        pred = self.estimator.pose_at(t + lead)
+        now = self.estimator.pose_at(t, max_ahead=cfg.max_lead)
+        pred = self.estimator.pose_at(t + lead, max_ahead=cfg.max_lead)
         target = law.step(dt, theta_a, now, pred, self.stick)
         row = {"t": t, "dt": dt, "comp": float(law.compensate), "lead": lead}
         for name, vec in (("xs", law.x_s), ("xc", law.x_c), ("delta", law.delta)):

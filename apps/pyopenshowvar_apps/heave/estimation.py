@@ -24,6 +24,9 @@ from .geometry import FloatArray, PlatformPose
 
 __all__ = ["ClockMapper", "LagEstimator", "PlatformEstimator", "RecentFit"]
 
+#: Physical bounds of any estimate: the legs' stroke (±130 mm) and a tilt the plate can reach.
+MAX_HEAVE, MAX_TILT = 130.0, 15.0
+
 
 class ClockMapper:
     """Maps a device's own clock (the PLC's TIME_MS, the board's millis()) onto ours.
@@ -83,7 +86,8 @@ class RecentFit:
             t = np.fromiter(self._t, float)
             x = np.fromiter(self._x, float)
             self._t_ref = float(t[-1])
-            degree = min(2, len(t) - 1)
+            # a quadratic needs enough points to average its noise; a line does with fewer
+            degree = 2 if len(t) >= 6 else min(1, len(t) - 1)
             if degree <= 0 or float(t[-1] - t[0]) < 1e-6:
                 self._coef = np.array([0.0, 0.0, float(x[-1])])
             else:
@@ -137,8 +141,17 @@ class PlatformEstimator:
     def ready(self) -> bool:
         return self.z.ready and self.phi.ready and self.theta.ready
 
-    def pose_at(self, t: float) -> PlatformPose:
-        return PlatformPose(self.z.at(t), self.phi.at(t), self.theta.at(t))
+    def pose_at(self, t: float, *, max_ahead: float = math.inf) -> PlatformPose:
+        """The pose at ``t``, extrapolating at most ``max_ahead`` seconds past each signal's
+        newest sample, and never beyond what the platform can do (its stroke, ±15°)."""
+        z, phi, theta = (
+            fit.at(min(t, fit.last_time + max_ahead)) for fit in (self.z, self.phi, self.theta)
+        )
+        return PlatformPose(
+            min(max(z, -MAX_HEAVE), MAX_HEAVE),
+            min(max(phi, -MAX_TILT), MAX_TILT),
+            min(max(theta, -MAX_TILT), MAX_TILT),
+        )
 
     def age(self, now: float) -> float:
         """Seconds since the oldest of the three signals was last sampled."""

@@ -20,6 +20,9 @@ from .waves import WaveGenerator
 
 __all__ = ["MotorLimits", "PlatformPLC"]
 
+#: Joint error (deg) within which a slow drive counts as in position and stops.
+IN_POSITION = 1e-3
+
 
 @dataclass(frozen=True)
 class MotorLimits:
@@ -137,6 +140,12 @@ class PlatformPLC:
         wanted = np.sign(error) * np.minimum(magnitude, np.abs(error) / dt)
         speed = self.beta_dot + np.clip(wanted - self.beta_dot, -amax * dt, amax * dt)
         self._integrate(speed, dt)
+        # in-position window: a drive that is there and slow stops (no endless creeping)
+        there = (np.abs(self.target - self.beta) < IN_POSITION) & (
+            np.abs(self.beta_dot) < amax * dt
+        )
+        self.beta = np.where(there, self.target, self.beta)
+        self.beta_dot = np.where(there, 0.0, self.beta_dot)
 
     def _brake(self, dt: float) -> None:
         amax = self.motors.accel

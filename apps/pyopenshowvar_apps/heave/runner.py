@@ -14,12 +14,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Self
 
-import numpy as np
-
-from pyopenshowvar.kinematics import fk_matrix
-
 from .accel import AccelReader
-from .control import MODEL
+from .emuproc import EmulatorProcess
 from .experiment import PROGRAM, GroundTruth, HeavePlan, HeaveResult, analyse, run_heave
 from .geometry import FloatArray
 from .master import PlatformClient
@@ -27,22 +23,7 @@ from .plc import MotorLimits
 from .plots import write_outputs
 from .simulator import PlatformConfig, PlatformThread
 
-__all__ = ["EmbeddedRig", "robot_state", "run_session"]
-
-
-def robot_state(emulator: Any) -> tuple[FloatArray, FloatArray]:
-    """The simulated robot's axes (deg) and flange pose in its base frame (4×4) from the
-    emulator's own state, never from a variable the controller publishes: the physical robot's
-    ground truth when the emulator runs a plant (``robot.plant.truth``), else the interpolator's
-    axes (the ideal plant, where the robot is exactly where it is commanded)."""
-    robot = emulator.robot
-    if robot is None:
-        raise RuntimeError("the emulator runs without a robot")
-    truth = getattr(getattr(robot, "plant", None), "truth", None)
-    if truth is not None:
-        return np.asarray(truth.q, dtype=np.float64), np.asarray(truth.flange, dtype=np.float64)
-    q = np.asarray(robot.q, dtype=np.float64)
-    return q, fk_matrix(MODEL, q)
+__all__ = ["EmbeddedRig", "run_session"]
 
 
 class EmbeddedRig:
@@ -66,17 +47,12 @@ class EmbeddedRig:
         self.truth: GroundTruth | None = None
 
     def __enter__(self) -> Self:
-        from kukavarproxy_emu import EmulatorConfig, EmulatorThread
-
-        config = EmulatorConfig(
-            host="127.0.0.1", port=0, program=str(PROGRAM), latency=self.latency,
-            seed=self.seed, discovery=False,
-        )  # fmt: skip
-        self.emulator = EmulatorThread(config).start()
+        self.emulator = EmulatorProcess(
+            program=str(PROGRAM), latency=self.latency, seed=self.seed
+        ).start()
         try:
             self.platform = PlatformThread(self.platform_config).start()
-            emu = self.emulator.emulator
-            self.truth = GroundTruth(lambda: robot_state(emu), self.mount)
+            self.truth = GroundTruth(self.emulator.robot_state, self.mount)
             truth = self.truth
             self.platform.call(lambda sim: sim.on_scan.append(truth))
         except BaseException:

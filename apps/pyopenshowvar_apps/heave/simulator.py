@@ -171,8 +171,12 @@ class PlatformSimulator:
             self.plc.step(min(now - last, 0.05))
             self.plc.time = now - self._t0_loop
             last = now
-            for callback in self.on_scan:
-                callback(self)
+            for callback in list(self.on_scan):
+                try:
+                    callback(self)
+                except Exception:  # a broken observer must not stop the PLC
+                    log.exception("on_scan callback failed; removed")
+                    self.on_scan.remove(callback)
 
     # --- accelerometer -----------------------------------------------------------------------------
     def _open_pty(self) -> None:
