@@ -168,7 +168,7 @@ class AccelReader:
     def feed(self, chunk: bytes, now: float) -> None:
         """Take received bytes: complete lines update :attr:`latest`; bounded buffering."""
         self._buffer += chunk
-        *lines, rest = self._buffer.split(b"\n")
+        *lines, rest = bytes(self._buffer).split(b"\n")
         if len(rest) > MAX_LINE:
             self.rejected += 1
             rest = b""

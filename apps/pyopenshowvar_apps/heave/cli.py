@@ -118,7 +118,11 @@ def heave(
         )
     except (LookupError, ValueError) as exc:
         fail(EXIT_USAGE, str(exc))
-    say = (lambda text: None) if as_json else (lambda text: typer.echo(f"heave: {text}", err=True))
+
+    def say(text: str) -> None:
+        if not as_json:
+            typer.echo(f"heave: {text}", err=True)
+
     if not isinstance(plan.operator, ScriptedOperator):
         say(f"operator: {plan.operator.name} (toggle compensation: space / button A, quit: q / B)")
     try:

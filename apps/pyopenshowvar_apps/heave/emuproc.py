@@ -96,10 +96,9 @@ class EmulatorProcess:
 
     def _first_line(self) -> str:
         assert self._proc is not None and self._proc.stdout is not None
+        stdout = self._proc.stdout
         out: list[str] = []
-        reader = threading.Thread(
-            target=lambda: out.append(self._proc.stdout.readline()), daemon=True
-        )  # type: ignore[union-attr]
+        reader = threading.Thread(target=lambda: out.append(stdout.readline()), daemon=True)
         reader.start()
         reader.join(self.start_timeout)
         if not out:

@@ -105,7 +105,7 @@ def square(start: float, leg: float = 1.5, level: float = 0.2) -> Callable[[floa
         k = int((t - start) // leg)
         if t < start or k >= 4:
             return np.zeros(3)
-        return level * moves[k]
+        return np.asarray(level * moves[k], dtype=np.float64)
 
     return script
 

@@ -86,7 +86,7 @@ class WaveGenerator:
                     float(rng.uniform(-math.pi, math.pi)),
                 )
             rows.append(WaveComponent(amplitude, f, phase))
-        return cls(*rows, ramp=ramp, geometry=geometry)
+        return cls(rows[0], rows[1], rows[2], ramp=ramp, geometry=geometry)
 
     @classmethod
     def thesis_max(
@@ -107,7 +107,7 @@ class WaveGenerator:
             )
             for name in ROWS
         ]
-        return cls(*rows, ramp=ramp, geometry=geometry)
+        return cls(rows[0], rows[1], rows[2], ramp=ramp, geometry=geometry)
 
     @classmethod
     def still(cls) -> WaveGenerator:
