@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 from pyopenshowvar_apps.cli import app
 from pyopenshowvar_apps.heave.control import ControlConfig, ControlLaw
+from pyopenshowvar_apps.heave.experiment import PROGRAM
 from pyopenshowvar_apps.heave.geometry import PlatformPose, platform_matrix
 from typer.testing import CliRunner
 
@@ -57,3 +61,47 @@ def test_kvp_emulate_heave_attenuates_the_world_heave(tmp_path) -> None:
     world = np.genfromtxt(tmp_path / "heave_world.csv", delimiter=",", names=True)
     comp = world["compensation"]
     assert comp[0] == 0 and comp[-1] == 1  # off, then switched on at run time
+
+
+def _spawn(*args: str) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-c", *args], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True
+    )
+
+
+def _line(proc: subprocess.Popen[str], prefix: str) -> str:
+    assert proc.stdout is not None
+    for _ in range(20):
+        line = proc.stdout.readline()
+        if line.startswith(prefix):
+            return line.strip()
+    raise AssertionError(f"no line starting with {prefix!r}")
+
+
+def test_kvp_heave_against_separate_robot_and_platform_processes(tmp_path: Path) -> None:
+    # the real-hardware path: kvp heave talks to a robot (a kukavarproxy-emu process running
+    # heave.src), a PLC (a `kvp platform` process) and its accelerometer device; no ground truth
+    emu = _spawn(
+        "from kukavarproxy_emu.__main__ import main; main()",
+        "--port", "0", "--no-discovery", "--latency", "kvp", "--program", str(PROGRAM),
+    )  # fmt: skip
+    plc = _spawn("from pyopenshowvar_apps.cli import main; main()", "platform", "--port", "0")
+    try:
+        kvp_port = _line(emu, "listening on").rsplit(":", 1)[1]
+        modbus = _line(plc, "platform PLC on modbus://").removeprefix("platform PLC on modbus://")
+        accel = _line(plc, "accelerometer on ").removeprefix("accelerometer on ")
+        out = tmp_path / "heave"
+        args = ["--port", kvp_port, "heave", "--modbus", modbus, "--accel", accel, "--json",
+                "--frequency", "0.5", "--duration", "2", "--no-plots", "--operator", "scripted",
+                "--out", str(out)]  # fmt: skip
+        res = CliRunner().invoke(app, args)
+        assert res.exit_code == 0, res.output
+        report = json.loads(res.stdout)
+        assert report["ground_truth"] is False and "estimate" in report["measured_by"]
+        assert report["rms_off_mm_z"] > 10.0  # the controller saw the waves move the flange
+        assert {"attenuation_rms_z", "attenuation_peak_x", "loop_hz"} <= set(report)
+        assert report["accel_lines"]["received"] > 100
+    finally:
+        for proc in (emu, plc):
+            proc.terminate()
+            proc.wait(timeout=10)
