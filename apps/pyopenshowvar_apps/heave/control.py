@@ -376,7 +376,9 @@ class ControlServer:
     def _control_step(self, t: float, dt: float, theta_a: FloatArray) -> FloatArray:
         assert self.law is not None
         law, cfg = self.law, self.config
-        lead = min(cfg.lead if cfg.lead is not None else self.lag.value, cfg.max_lead)
+        # the target holds until the next write, one loop period later: aim at its middle
+        measured = self.lag.value + 0.5 * min(dt, 0.05)
+        lead = min(cfg.lead if cfg.lead is not None else measured, cfg.max_lead)
         now = self.estimator.pose_at(t, max_ahead=cfg.max_lead)
         pred = self.estimator.pose_at(t + lead, max_ahead=cfg.max_lead)
         target = law.step(dt, theta_a, now, pred, self.stick)
