@@ -87,6 +87,7 @@ def heave(
     from pyopenshowvar_apps.common import EXIT_USAGE, Opts, fail
 
     from .control import ControlConfig
+    from .estimation import ATTITUDES
     from .experiment import HeavePlan
     from .operator import ScriptedOperator, select_operator, square
     from .waves import WaveGenerator
@@ -102,8 +103,8 @@ def heave(
             )
         _sweep(seed, out, as_json)
         return
-    if attitude not in ("accel", "plc") or waves not in ("thesis", "random") or frequency <= 0:
-        fail(EXIT_USAGE, "--attitude accel|plc, --waves thesis|random and --frequency > 0")
+    if attitude not in ATTITUDES or waves not in ("thesis", "random") or frequency <= 0:
+        fail(EXIT_USAGE, "--attitude fused|accel|plc, --waves thesis|random and --frequency > 0")
     control = ControlConfig(attitude=attitude, lead=lead)
     if waves == "thesis":
         plan = HeavePlan.thesis(seed, periods=periods, frequency=frequency, control=control)

@@ -86,8 +86,9 @@ class ControlConfig:
     initial_lead: float = 0.05
     #: The prediction never reaches further ahead than this (s): beyond it a fit is a guess.
     max_lead: float = 0.25
-    #: "accel": roll/pitch from the accelerometer (thesis); "plc": from the PLC's registers.
-    attitude: str = "accel"
+    #: Roll/pitch from "fused" (PLC corrected by the accelerometer), "accel" (the thesis: the
+    #: accelerometer alone) or "plc" (the PLC's registers alone): see PlatformEstimator.
+    attitude: str = "fused"
     #: The accelerometer board's low-pass cut-off (Hz), to undo its delay.
     accel_cutoff: float = 5.0
     platform_period: float = 0.01
@@ -231,8 +232,8 @@ class ControlServer:
         self.waves = waves
         self.mount = mount
         cfg = self.config
-        if cfg.attitude == "accel" and accel is None:
-            raise ValueError("attitude 'accel' needs the accelerometer stream")
+        if cfg.attitude != "plc" and accel is None:
+            raise ValueError(f"attitude {cfg.attitude!r} needs the accelerometer stream")
         self.estimator = PlatformEstimator(
             attitude=cfg.attitude, accel_lag=1.0 / (2.0 * math.pi * cfg.accel_cutoff)
         )
@@ -271,7 +272,7 @@ class ControlServer:
         loop = asyncio.get_running_loop()
         self._tasks = [loop.create_task(self._guard(self._platform_task()), name="platform")]
         await asyncio.wait_for(self._first_state.wait(), 5.0)
-        if self.config.attitude == "accel":
+        if self.config.attitude != "plc":
             await self._wait_for(lambda: self.estimator.ready, 3.0, "the accelerometer stream")
         self._tasks += [
             loop.create_task(self._guard(self._actuation_task(theta0)), name="actuation"),

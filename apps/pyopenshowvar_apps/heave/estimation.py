@@ -3,8 +3,8 @@
 * :class:`RecentFit` — a least-squares quadratic through the last ``window`` seconds of samples
   of one signal: its value, rate and acceleration at any time near now, with far less noise than
   a difference quotient and no lag for waves (a sine is locally quadratic).
-* :class:`PlatformEstimator` — heave from the PLC (Modbus), roll and pitch from the accelerometer
-  (or from the PLC: ``attitude="plc"``); :meth:`~PlatformEstimator.pose_at` evaluates the fits at
+* :class:`PlatformEstimator` — heave from the PLC (Modbus), roll and pitch from the PLC corrected
+  by the accelerometer (or from either alone); :meth:`~PlatformEstimator.pose_at` evaluates the fits at
   any time, so the same call gives the pose "now" (for x_c, eq. 4.14) and the pose predicted for
   when a command will have been executed (the feed-forward). The board's low-pass delays its
   angles by about 1/(2π·f_c); the estimator shifts them back by that much.
@@ -22,7 +22,7 @@ import numpy as np
 
 from .geometry import FloatArray, PlatformPose
 
-__all__ = ["ClockMapper", "LagEstimator", "PlatformEstimator", "RecentFit"]
+__all__ = ["ATTITUDES", "ClockMapper", "LagEstimator", "PlatformEstimator", "RecentFit"]
 
 #: Physical bounds of any estimate: the legs' stroke (±130 mm) and a tilt the plate can reach.
 MAX_HEAVE, MAX_TILT = 130.0, 15.0
@@ -112,34 +112,73 @@ class RecentFit:
         return float(2.0 * a * (t - self._t_ref) + b)
 
 
+ATTITUDES = ("fused", "accel", "plc")
+
+
 class PlatformEstimator:
-    """Heave, roll and pitch of the platform from the PLC and the accelerometer stream."""
+    """Heave, roll and pitch of the platform from the PLC and the accelerometer stream.
+
+    Heave always comes from the PLC (the thesis: forward kinematics of the measured joints, over
+    Modbus). Roll and pitch, by ``attitude``:
+
+    * ``"accel"`` — the accelerometer alone, as in the thesis. Its angles are noisy (≈0.1° after
+      the board's filter), so they are fitted over a longer window (``accel_window``), which
+      suits the thesis' slow waves and lags fast ones;
+    * ``"plc"`` — the PLC's forward kinematics alone (noise-free, blind to anything the joint
+      encoders do not see: a compliant plate, a mis-mounted sensor, a tilted floor);
+    * ``"fused"`` — a complementary filter: the PLC's angles carry the motion and the
+      accelerometer corrects their slowly varying offset (time constant ``fuse_tau``), so the
+      estimate is as quick as the PLC and as absolute as the accelerometer.
+    """
 
     def __init__(
-        self, *, attitude: str = "accel", window: float = 0.4, accel_lag: float = 0.0
+        self,
+        *,
+        attitude: str = "fused",
+        window: float = 0.4,
+        accel_window: float = 1.0,
+        accel_lag: float = 0.0,
+        fuse_tau: float = 2.0,
     ) -> None:
-        if attitude not in ("accel", "plc"):
-            raise ValueError("attitude must be 'accel' (the thesis' accelerometer) or 'plc'")
+        if attitude not in ATTITUDES:
+            raise ValueError(f"attitude must be one of {', '.join(ATTITUDES)}, not {attitude!r}")
         self.attitude = attitude
         self.accel_lag = accel_lag
+        self.fuse_tau = fuse_tau
         self.z = RecentFit(window)
-        self.phi = RecentFit(window)
-        self.theta = RecentFit(window)
+        angle_window = accel_window if attitude == "accel" else window
+        self.phi = RecentFit(angle_window)
+        self.theta = RecentFit(angle_window)
+        #: fused: accelerometer minus PLC angle, low-passed (deg)
+        self.offset = np.zeros(2)
+        self._last_accel: float | None = None
 
     def add_plc(self, t: float, z: float, phi: float, theta: float) -> None:
         self.z.add(t, z)
-        if self.attitude == "plc":
+        if self.attitude != "accel":
             self.phi.add(t, phi)
             self.theta.add(t, theta)
 
     def add_accel(self, t: float, roll: float, pitch: float) -> None:
+        t_true = t - self.accel_lag
         if self.attitude == "accel":
-            self.phi.add(t - self.accel_lag, roll)
-            self.theta.add(t - self.accel_lag, pitch)
+            self.phi.add(t_true, roll)
+            self.theta.add(t_true, pitch)
+        elif self.attitude == "fused" and self.phi.ready:
+            diff = np.array([roll - self.phi.at(t_true), pitch - self.theta.at(t_true)])
+            if self._last_accel is None:
+                self.offset = diff
+            else:
+                gain = 1.0 - math.exp(-max(t - self._last_accel, 0.0) / self.fuse_tau)
+                self.offset += gain * (diff - self.offset)
+            self._last_accel = t
 
     @property
     def ready(self) -> bool:
-        return self.z.ready and self.phi.ready and self.theta.ready
+        accel_ok = (
+            self.attitude == "plc" or self._last_accel is not None or self.attitude == "accel"
+        )
+        return self.z.ready and self.phi.ready and self.theta.ready and accel_ok
 
     def pose_at(self, t: float, *, max_ahead: float = math.inf) -> PlatformPose:
         """The pose at ``t``, extrapolating at most ``max_ahead`` seconds past each signal's
@@ -147,6 +186,8 @@ class PlatformEstimator:
         z, phi, theta = (
             fit.at(min(t, fit.last_time + max_ahead)) for fit in (self.z, self.phi, self.theta)
         )
+        if self.attitude == "fused":
+            phi, theta = phi + self.offset[0], theta + self.offset[1]
         return PlatformPose(
             min(max(z, -MAX_HEAVE), MAX_HEAVE),
             min(max(phi, -MAX_TILT), MAX_TILT),

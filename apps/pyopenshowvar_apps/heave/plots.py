@@ -69,6 +69,7 @@ def _platform_plot(
     fig, axes = new_figure(4, 1, figsize=(9, 10), sharex=True)
     tp = np.array([r["t"] for r in plat])
     tc = np.array([r["t"] for r in control])
+    attitude = result.info.get("attitude", "")
     labels = [("heave", "heave z (mm)", "est_z"), ("roll", "roll φ (deg)", "est_phi"),
               ("pitch", "pitch θ (deg)", "est_theta")]  # fmt: skip
     for k, (ax, (key, label, est)) in enumerate(zip(axes, labels, strict=False)):
@@ -76,7 +77,7 @@ def _platform_plot(
             ax.plot(s["t"], s["truth"][:, 7 + k], lw=1.2, label="true (simulator)")
         ax.plot(tp, [r[key] for r in plat], lw=0.8, label="PLC (Modbus)")
         ax.plot(tc, [r[est] for r in control], lw=0.8, alpha=0.8,
-                label="server estimate" + (" (accelerometer)" if k else ""))  # fmt: skip
+                label="server estimate" + (f" ({attitude})" if k else ""))  # fmt: skip
         ax.set_ylabel(label)
         ax.grid(True, alpha=0.3)
     axes[0].legend(loc="upper left", fontsize=8)

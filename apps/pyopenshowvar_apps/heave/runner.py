@@ -100,7 +100,7 @@ async def run_session(
     from pyopenshowvar import Client
 
     accel = None
-    if plan.control.attitude == "accel":
+    if plan.control.attitude != "plc":
         if accel_port is None:
             raise ValueError("the accelerometer's serial port is needed (or use --attitude plc)")
         accel = await AccelReader(accel_port).open()
