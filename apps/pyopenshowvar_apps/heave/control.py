@@ -6,7 +6,7 @@
    thesis' k absorbs a fixed period, ours is in mm/s so the speed does not depend on the loop
    rate);
 2. the end-effector's world position x_c from T_c = T_z·T_θ·T_φ·T_A (eq. 4.14): T_z from the PLC's
-   heave, T_θ and T_φ from the accelerometer, T_A = FK(θ_a);
+   heave, T_θ and T_φ from its angles corrected by the accelerometer, T_A = FK(θ_a);
 3. a PID per translational axis on x_s − x_c gives the correction δx_d;
 4. the platform's motion is the disturbance, and (thesis: "given as a negative input") enters as
    a feed-forward: the robot-base target is (T_z T_θ T_φ · T_mount)⁻¹ · [R_s | x_s + δx_d], with
