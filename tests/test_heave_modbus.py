@@ -77,3 +77,22 @@ async def test_platform_client_units_and_errors() -> None:
             assert state.flag("enabled")
     with pytest.raises(ConnectionError, match="cannot connect"):
         await PlatformClient("127.0.0.1", sim.port, timeout=0.5).connect()
+
+
+async def test_garbage_on_the_modbus_port_does_not_stop_the_plc() -> None:
+    async with PlatformSimulator(PlatformConfig(port=0, accel=False)) as sim:
+        reader, writer = await asyncio.open_connection("127.0.0.1", sim.port)
+        # a valid header announcing 65535 bytes, then 200 kB of noise in one go
+        writer.write(b"\x00\x01\x00\x00\xff\xff\x01\x03" + bytes(range(256)) * 800)
+        await writer.drain()
+        await asyncio.sleep(0.3)
+        writer.close()
+        cycle = sim.plc.cycle
+        client = AsyncModbusTcpClient("127.0.0.1", port=sim.port, timeout=2, retries=0)
+        assert await client.connect()
+        try:
+            state = reg.decode_state((await client.read_input_registers(0, count=17)).registers)
+        finally:
+            client.close()
+        await asyncio.sleep(0.05)
+        assert state.cycle >= cycle and sim.plc.cycle > cycle  # still serving, still scanning
