@@ -81,7 +81,7 @@ async def test_platform_client_units_and_errors() -> None:
 
 async def test_garbage_on_the_modbus_port_does_not_stop_the_plc() -> None:
     async with PlatformSimulator(PlatformConfig(port=0, accel=False)) as sim:
-        reader, writer = await asyncio.open_connection("127.0.0.1", sim.port)
+        _reader, writer = await asyncio.open_connection("127.0.0.1", sim.port)
         # a valid header announcing 65535 bytes, then 200 kB of noise in one go
         writer.write(b"\x00\x01\x00\x00\xff\xff\x01\x03" + bytes(range(256)) * 800)
         await writer.drain()
