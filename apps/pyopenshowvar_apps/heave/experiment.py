@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from .control import ControlConfig, ControlServer
+from .control import MODEL, ControlConfig, ControlServer
 from .geometry import FloatArray, PlatformPose, platform_matrix
 from .operator import OperatorInput
 from .waves import WaveGenerator
@@ -201,6 +201,28 @@ def _interp_columns(t: FloatArray, rows: list[dict[str, float]], keys: list[str]
     return np.stack([np.interp(t, src_t, np.array([r[k] for r in rows])) for k in keys], axis=1)
 
 
+def _axis_effort(t: FloatArray, q: FloatArray) -> dict[str, float]:
+    """How hard the robot's axes worked while compensating: the 99th percentile of each axis'
+    speed and acceleration in % of its limit (§3.1), the largest over the axes, and which."""
+    if len(t) < 20:
+        return {}
+    step = 0.024  # two IPO cycles: the robot's state changes once per 12 ms
+    grid = np.arange(t[0], t[-1], step)
+    qq = np.stack([np.interp(grid, t, q[:, k]) for k in range(6)], axis=1)
+    speed = np.gradient(qq, step, axis=0)
+    accel = np.gradient(speed, step, axis=0)
+    out: dict[str, float] = {}
+    for name, values, limit in (
+        ("speed", speed, MODEL.max_speed),
+        ("accel", accel, MODEL.max_accel),
+    ):
+        pct = 100.0 * np.percentile(np.abs(values), 99, axis=0) / np.asarray(limit, float)
+        k = int(np.argmax(pct))
+        out[f"axis_{name}_p99_pct"] = float(pct[k])
+        out[f"axis_{name}_p99_axis"] = float(k + 1)
+    return out
+
+
 def analyse(
     server: ControlServer, phases: dict[str, float], truth: GroundTruth | None
 ) -> HeaveResult:
@@ -240,6 +262,7 @@ def analyse(
         for i, a in enumerate(AXES):
             d = float(np.sqrt(np.mean(still[on, i] ** 2)))
             m[f"disturbance_rms_on_mm_{a}"] = d
+        m.update(_axis_effort(t[on], data[on, 10:16]))
     dts = np.diff(ctrl_t[(ctrl_t >= phases["off_start"]) & (ctrl_t < phases["end"])])
     m["loop_hz"] = float(1.0 / np.mean(dts)) if dts.size else math.nan
     m["loop_p50_ms"] = float(np.percentile(dts, 50) * 1e3) if dts.size else math.nan

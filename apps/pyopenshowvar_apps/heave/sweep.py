@@ -30,6 +30,8 @@ __all__ = ["DEFAULT_FREQUENCIES", "SWEEP_MOTORS", "SweepResult", "breakdown_freq
 
 DEFAULT_FREQUENCIES = (0.1, 0.2, 0.3, 0.5, 0.7, 1.0, 1.5, 2.0)
 SWEEP_MOTORS = MotorLimits(speed=900.0, accel=30000.0)
+#: Figures of each experiment kept in the sweep's table.
+KEPT = ("attenuation", "rms", "loop", "lead", "axis_")
 
 
 @dataclass
@@ -85,12 +87,17 @@ def run_sweep(
         m = res.metrics
         row = {
             "frequency_hz": f,
-            **{k: m[k] for k in sorted(m) if k.startswith(("attenuation", "rms", "loop", "lead"))},
+            **{k: m[k] for k in sorted(m) if k.startswith(KEPT)},
         }
         result.rows.append(row)
         if progress:
             progress(
-                f"{f:.2f} Hz: heave attenuation {m['attenuation_rms_z']:.1f} % RMS, loop {m['loop_hz']:.0f} Hz"
+                f"{f:.2f} Hz: heave attenuation {m['attenuation_rms_z']:.1f} % RMS, loop "
+                f"{m['loop_hz']:.0f} Hz, command delay {m['lead_ms']:.0f} ms, axes at "
+                f"{m.get('axis_speed_p99_pct', math.nan):.0f} % of a speed limit "
+                f"(A{m.get('axis_speed_p99_axis', 0):.0f}), "
+                f"{m.get('axis_accel_p99_pct', math.nan):.0f} % of an acceleration limit "
+                f"(A{m.get('axis_accel_p99_axis', 0):.0f})"
             )
     freqs = [r["frequency_hz"] for r in result.rows]
     result.breakdown_hz = breakdown_frequency(freqs, [r["attenuation_rms_z"] for r in result.rows])
