@@ -80,8 +80,15 @@ class EmulatorProcess:
                 "--latency", self.latency, "--sample", str(self.sample)]  # fmt: skip
         if self.seed is not None:
             args += ["--seed", str(self.seed)]
+        # its own session: Ctrl-C in the terminal goes to the experiment, which stops the child
+        # in order (closing its stdin), and the scheduler treats it as the separate machine it is
         self._proc = subprocess.Popen(
-            args, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+            args,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            start_new_session=True,
         )
         line = self._first_line()
         if not line.startswith("port "):
