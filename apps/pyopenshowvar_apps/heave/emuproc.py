@@ -32,21 +32,22 @@ from .geometry import FloatArray
 
 __all__ = ["EmulatorProcess", "robot_state_of"]
 
-#: seq, time, q1..q6, the 3×4 top of the flange pose
-_SLOTS = 2 + 6 + 12
+#: seq, wall time, robot time, q1..q6, the 3×4 top of the flange pose
+_SLOTS = 3 + 6 + 12
 
 
-def robot_state_of(robot: Any, model: Any) -> tuple[FloatArray, FloatArray]:
-    """Axes (deg) and flange pose in the base frame (4×4) of an emulator's robot: the physical
-    robot's ground truth when the emulator runs a plant (``robot.plant.truth``), else the
-    interpolator's axes (the ideal plant: the robot is exactly where it is commanded)."""
+def robot_state_of(robot: Any, model: Any) -> tuple[FloatArray, FloatArray, float]:
+    """Axes (deg), flange pose in the base frame (4×4) and the robot's own clock (s) of an
+    emulator's robot: the physical robot's ground truth when the emulator runs a plant
+    (``robot.plant.truth``), else the interpolator's axes (the ideal plant: the robot is exactly
+    where it is commanded)."""
     from pyopenshowvar.kinematics import fk_matrix
 
     truth = getattr(getattr(robot, "plant", None), "truth", None)
     if truth is not None:
-        return np.asarray(truth.q, float), np.asarray(truth.flange, float)
+        return np.asarray(truth.q, float), np.asarray(truth.flange, float), float(truth.time)
     q = np.asarray(robot.q, float)
-    return q, np.asarray(fk_matrix(model, q), float)
+    return q, np.asarray(fk_matrix(model, q), float), float(robot.time)
 
 
 class EmulatorProcess:
@@ -141,8 +142,9 @@ class EmulatorProcess:
     def __exit__(self, *exc: object) -> None:
         self.stop()
 
-    def robot_state(self) -> tuple[FloatArray, FloatArray]:
-        """The robot's axes (deg) and flange pose in its base frame (4×4) as last sampled."""
+    def robot_state(self) -> tuple[FloatArray, FloatArray, float]:
+        """The robot's axes (deg), flange pose in its base frame (4×4) and its own clock (s,
+        one step per interpolation cycle) as last sampled."""
         view = self._view
         if view is None:
             raise RuntimeError("the emulator process is not running")
@@ -156,8 +158,8 @@ class EmulatorProcess:
         else:  # a writer stuck mid-write (a stalled machine): the last consistent sample
             values = self._last
         flange = np.eye(4)
-        flange[:3] = values[7:19].reshape(3, 4)
-        return values[1:7], flange
+        flange[:3] = values[8:20].reshape(3, 4)
+        return values[2:8], flange, float(values[1])
 
 
 def _serve(args: argparse.Namespace) -> None:
@@ -175,11 +177,12 @@ def _serve(args: argparse.Namespace) -> None:
             raise RuntimeError("the emulator runs without a robot")
 
         def write() -> None:
-            q, flange = robot_state_of(robot, KR6R900SIXX)
+            q, flange, robot_time = robot_state_of(robot, KR6R900SIXX)
             shared[0] += 1.0  # odd: being written
             shared[1] = time.monotonic()  # CLOCK_MONOTONIC: the same clock in every process
-            shared[2:8] = q
-            shared[8:20] = flange[:3].ravel()
+            shared[2] = robot_time
+            shared[3:9] = q
+            shared[9:21] = flange[:3].ravel()
             shared[0] += 1.0  # even: consistent
 
         async def sampler() -> None:

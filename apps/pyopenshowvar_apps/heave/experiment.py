@@ -71,14 +71,14 @@ class HeavePlan:
 class GroundTruth:
     """World pose of the flange from the simulators' state, one sample per PLC scan.
 
-    ``robot_state`` returns the simulated robot's axes (deg) and its flange pose in the robot's
-    base frame (4×4, mm) as the simulator knows them, at the moment of the call; it runs on the
-    platform simulator's thread (every PLC scan).
+    ``robot_state`` returns the simulated robot's axes (deg), its flange pose in the robot's
+    base frame (4×4, mm) and its own clock (s) as the simulator knows them, at the moment of the
+    call; it runs on the platform simulator's thread (every PLC scan).
     """
 
     def __init__(
         self,
-        robot_state: Callable[[], tuple[FloatArray, FloatArray]],
+        robot_state: Callable[[], tuple[FloatArray, FloatArray, float]],
         mount: FloatArray | None = None,
         max_rows: int = 400_000,
     ) -> None:
@@ -92,20 +92,28 @@ class GroundTruth:
     def __call__(self, sim: Any) -> None:
         # raw numbers only (this runs on every PLC scan); the transforms run batched, later
         pose: PlatformPose = sim.pose
-        q, flange = self.robot_state()
+        q, flange, robot_time = self.robot_state()
         self.rows.append(
-            (time.monotonic(), pose.z, pose.phi, pose.theta, *q, *np.asarray(flange)[:3].ravel())
+            (
+                time.monotonic(),
+                pose.z,
+                pose.phi,
+                pose.theta,
+                *q,
+                *np.asarray(flange)[:3].ravel(),
+                robot_time,
+            )
         )
 
     COLUMNS = (
         "t", "world_x", "world_y", "world_z", "still_x", "still_y", "still_z",
-        "true_heave", "true_roll", "true_pitch", "q1", "q2", "q3", "q4", "q5", "q6",
+        "true_heave", "true_roll", "true_pitch", "q1", "q2", "q3", "q4", "q5", "q6", "robot_time",
     )  # fmt: skip
 
     def array(self) -> FloatArray:
         """One row per scan, :attr:`COLUMNS`: the flange's world position, where it would be had
         the robot stood still on ``flange0``, the platform's true pose and the robot's axes."""
-        raw = np.array(list(self.rows), dtype=np.float64).reshape(-1, 22)
+        raw = np.array(list(self.rows), dtype=np.float64).reshape(-1, 23)
         plates = np.array([platform_matrix(PlatformPose(*r[1:4])) @ self.mount for r in raw])
         plates = plates.reshape(-1, 4, 4)
         flange_xyz1 = np.column_stack([raw[:, 10:22].reshape(-1, 3, 4)[:, :, 3], np.ones(len(raw))])
@@ -114,7 +122,7 @@ class GroundTruth:
             np.vstack([raw[0, 10:22].reshape(3, 4), [0, 0, 0, 1]]) if len(raw) else np.eye(4)
         )  # fmt: skip
         still = (plates @ np.asarray(f0)[:, 3])[:, :3]
-        return np.column_stack([raw[:, :1], world, still, raw[:, 1:4], raw[:, 4:10]])
+        return np.column_stack([raw[:, :1], world, still, raw[:, 1:4], raw[:, 4:10], raw[:, 22:]])
 
 
 @dataclass
@@ -201,16 +209,18 @@ def _interp_columns(t: FloatArray, rows: list[dict[str, float]], keys: list[str]
     return np.stack([np.interp(t, src_t, np.array([r[k] for r in rows])) for k in keys], axis=1)
 
 
-def _axis_effort(t: FloatArray, q: FloatArray) -> dict[str, float]:
+def _axis_effort(robot_time: FloatArray, q: FloatArray) -> dict[str, float]:
     """How hard the robot's axes worked while compensating: the 99th percentile of each axis'
-    speed and acceleration in % of its limit (§3.1), the largest over the axes, and which."""
+    speed and acceleration in % of its limit (§3.1), the largest over the axes, and which.
+
+    Differences run on the robot's own clock, one state per interpolation cycle (the recorder
+    samples faster and sees each state several times)."""
+    t, first = np.unique(robot_time, return_index=True)
     if len(t) < 20:
         return {}
-    step = 0.024  # two IPO cycles: the robot's state changes once per 12 ms
-    grid = np.arange(t[0], t[-1], step)
-    qq = np.stack([np.interp(grid, t, q[:, k]) for k in range(6)], axis=1)
-    speed = np.gradient(qq, step, axis=0)
-    accel = np.gradient(speed, step, axis=0)
+    q = q[first]
+    speed = np.gradient(q, t, axis=0)
+    accel = np.gradient(speed, t, axis=0)
     out: dict[str, float] = {}
     for name, values, limit in (
         ("speed", speed, MODEL.max_speed),
@@ -262,7 +272,7 @@ def analyse(
         for i, a in enumerate(AXES):
             d = float(np.sqrt(np.mean(still[on, i] ** 2)))
             m[f"disturbance_rms_on_mm_{a}"] = d
-        m.update(_axis_effort(t[on], data[on, 10:16]))
+        m.update(_axis_effort(data[on, 16], data[on, 10:16]))
     dts = np.diff(ctrl_t[(ctrl_t >= phases["off_start"]) & (ctrl_t < phases["end"])])
     m["loop_hz"] = float(1.0 / np.mean(dts)) if dts.size else math.nan
     m["loop_p50_ms"] = float(np.percentile(dts, 50) * 1e3) if dts.size else math.nan
