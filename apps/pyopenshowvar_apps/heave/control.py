@@ -20,7 +20,7 @@
 ``heave.src`` follows with ``PTP … C_PTP``: the KRC does the inverse kinematics, as in the thesis)
 and reads θ_a (``$AXIS_ACT``) back, both pipelined on one KVP connection.
 
-**Platform task**: writes the wave set-points (eq. 4.13) to the PLC and reads its state, 100 Hz.
+**Platform task**: writes the wave set-points (eq. 4.13) to the PLC and reads its state, 50 Hz.
 The accelerometer's lines arrive through :class:`~.accel.AccelReader`. **Operator task**: polls
 the input device; its toggle switches the compensation at run time.
 """
@@ -91,7 +91,7 @@ class ControlConfig:
     attitude: str = "fused"
     #: The accelerometer board's low-pass cut-off (Hz), to undo its delay.
     accel_cutoff: float = 5.0
-    platform_period: float = 0.01
+    platform_period: float = 0.02
     operator_period: float = 0.02
 
 

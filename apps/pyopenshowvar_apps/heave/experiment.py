@@ -8,7 +8,7 @@ Modbus master to the platform PLC, the accelerometer stream — through the phas
 
 and measures the end-effector's world motion in both windows. With the embedded simulators
 (:class:`EmbeddedRig`) the world pose of the flange is **ground truth** from the simulators' own
-state, T_platform(true pose) · T_mount · FK(robot axes), sampled at every PLC scan (5 ms); it
+state, T_platform(true pose) · T_mount · FK(robot axes), sampled at every PLC scan (10 ms); it
 is never computed from what the controller reads. Against real hardware there is no ground truth;
 the figures then come from the control server's own x_c (eq. 4.14) and say so
 (``ground_truth: false``).

@@ -40,7 +40,7 @@ class PlatformConfig:
     host: str = "127.0.0.1"
     #: Modbus TCP port; 0 picks a free one (502 is the standard port, but needs root).
     port: int = 5020
-    scan: float = 0.005
+    scan: float = 0.01
     motors: MotorLimits = field(default_factory=MotorLimits)
     geometry: PlatformGeometry = THESIS_PLATFORM
     watchdog: float = 1.0
