@@ -135,7 +135,7 @@ class PlatformEstimator:
         self,
         *,
         attitude: str = "fused",
-        window: float = 0.4,
+        window: float = 0.15,
         accel_window: float = 1.0,
         accel_lag: float = 0.0,
         fuse_tau: float = 2.0,
