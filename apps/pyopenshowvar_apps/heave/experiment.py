@@ -15,7 +15,8 @@ the figures then come from the control server's own x_c (eq. 4.14) and say so
 
 Attenuation per axis, in percent: 100·(1 − RMS_on / RMS_off) and the same for the peak, where the
 motion is the flange's world position minus the set-point x_s. With waves of one frequency the
-windows default to whole periods, so the RMS of each window is the wave's and not a fraction.
+windows are whole periods (the demo: half periods, which is enough for a sine's RMS and peak), so
+the RMS of each window is the wave's and not a fraction of it.
 """
 
 from __future__ import annotations
