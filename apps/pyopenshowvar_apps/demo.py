@@ -111,7 +111,7 @@ def _heave(out: Path, speed: float, quick: bool) -> CaseResult:
     # its own embedded rig (emulator + platform simulator), always in real time
     from pyopenshowvar_apps.heave.demo import demo_case
 
-    return demo_case(out, speed, quick)
+    return demo_case(out, speed, quick, plant=PLANT["kind"])
 
 
 #: (sub-folder, title, runner) in the thesis' order.

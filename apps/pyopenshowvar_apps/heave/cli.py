@@ -92,10 +92,9 @@ def heave(
     from .operator import ScriptedOperator, select_operator, square
     from .waves import WaveGenerator
 
-    embedded = Opts.emulator is not None
-    if embedded:  # the generic --emulate emulator runs `follow`; ours runs heave.src
-        Opts.emulator.stop()
-        Opts.emulator = None
+    # --emulate: our own embedded set-up (the emulator running heave.src in its own process and
+    # the platform simulator), not the generic embedded emulator
+    embedded = Opts.emulate
     if sweep:
         if not embedded:
             fail(
@@ -147,7 +146,7 @@ def _run(
     from .runner import EmbeddedRig, run_session
 
     if embedded:
-        with EmbeddedRig(seed=seed) as rig:
+        with EmbeddedRig(seed=seed, plant=Opts.plant) as rig:
             say(
                 f"embedded emulator on {rig.kvp_address[1]}, platform PLC on {rig.modbus_address[1]}"
             )
@@ -210,10 +209,12 @@ def _print(result: Any) -> None:
 
 
 def _sweep(seed: int, out: Path, as_json: bool) -> None:
+    from pyopenshowvar_apps.common import Opts
+
     from .sweep import describe, run_sweep
 
     progress = None if as_json else (lambda text: typer.echo(f"sweep: {text}", err=True))
-    result = run_sweep(seed=seed, out_dir=out, progress=progress)
+    result = run_sweep(seed=seed, out_dir=out, progress=progress, plant=Opts.plant)
     if as_json:
         typer.echo(json.dumps(describe(result), indent=1))
         return

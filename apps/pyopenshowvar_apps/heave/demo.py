@@ -19,13 +19,15 @@ from .runner import EmbeddedRig, run_session
 __all__ = ["demo_case"]
 
 
-def demo_case(out: Path, speed: float = 1.0, quick: bool = False) -> CaseResult:
+def demo_case(
+    out: Path, speed: float = 1.0, quick: bool = False, *, plant: str = "dynamic"
+) -> CaseResult:
     plan = HeavePlan.thesis(19, periods=1, ramp=1.0, settle=0.5, park=False)
     plan.off = plan.on = 0.5 / plan.waves.heave.frequency
     plan.operator = ScriptedOperator(
         square(plan.waves.ramp + plan.off + plan.settle + 0.5, leg=1.0)
     )
-    with EmbeddedRig(seed=19) as rig:
+    with EmbeddedRig(seed=19, plant=plant) as rig:
         res = asyncio.run(
             run_session(
                 plan,

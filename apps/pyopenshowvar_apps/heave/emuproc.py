@@ -59,10 +59,11 @@ class EmulatorProcess:
         program: str,
         latency: str = "kvp",
         seed: int | None = None,
+        plant: str = "dynamic",
         sample: float = 0.003,
         start_timeout: float = 30.0,
     ) -> None:
-        self.program, self.latency, self.seed = program, latency, seed
+        self.program, self.latency, self.seed, self.plant = program, latency, seed, plant
         self.sample, self.start_timeout = sample, start_timeout
         self.port = 0
         self._proc: subprocess.Popen[str] | None = None
@@ -78,7 +79,7 @@ class EmulatorProcess:
         self._map = mmap.mmap(self._file.fileno(), 8 * _SLOTS)
         self._view = np.ndarray((_SLOTS,), dtype=np.float64, buffer=self._map)
         args = [sys.executable, "-m", __name__, "--state", self._file.name, "--program", self.program,
-                "--latency", self.latency, "--sample", str(self.sample)]  # fmt: skip
+                "--latency", self.latency, "--sample", str(self.sample), "--plant", self.plant]  # fmt: skip
         if self.seed is not None:
             args += ["--seed", str(self.seed)]
         # its own session: Ctrl-C in the terminal goes to the experiment, which stops the child
@@ -168,7 +169,7 @@ def _serve(args: argparse.Namespace) -> None:
 
     config = EmulatorConfig(
         host="127.0.0.1", port=0, program=args.program, latency=args.latency,
-        seed=args.seed, discovery=False,
+        seed=args.seed, discovery=False, plant=args.plant,
     )  # fmt: skip
     with open(args.state, "r+b") as fh, EmulatorThread(config) as emu:
         shared = np.ndarray((_SLOTS,), dtype=np.float64, buffer=mmap.mmap(fh.fileno(), 8 * _SLOTS))
@@ -202,6 +203,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--latency", default="kvp")
     ap.add_argument("--seed", type=int, default=None)
     ap.add_argument("--sample", type=float, default=0.003)
+    ap.add_argument("--plant", default="dynamic")
     try:
         _serve(ap.parse_args(argv))
     except KeyboardInterrupt:  # pragma: no cover

@@ -37,8 +37,9 @@ class EmbeddedRig:
         motors: MotorLimits | None = None,
         accel_noise: float = 0.005,
         mount: FloatArray | None = None,
+        plant: str = "dynamic",
     ) -> None:
-        self.seed, self.latency, self.mount = seed, latency, mount
+        self.seed, self.latency, self.mount, self.plant = seed, latency, mount, plant
         self.platform_config = PlatformConfig(
             port=0, seed=seed, motors=motors or MotorLimits(), accel_noise=accel_noise
         )
@@ -48,7 +49,7 @@ class EmbeddedRig:
 
     def __enter__(self) -> Self:
         self.emulator = EmulatorProcess(
-            program=str(PROGRAM), latency=self.latency, seed=self.seed
+            program=str(PROGRAM), latency=self.latency, seed=self.seed, plant=self.plant
         ).start()
         try:
             self.platform = PlatformThread(self.platform_config).start()

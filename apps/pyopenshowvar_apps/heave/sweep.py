@@ -67,13 +67,14 @@ def run_sweep(
     control: ControlConfig | None = None,
     minimum_window: float = 3.0,
     progress: Callable[[str], None] | None = None,
+    plant: str = "dynamic",
 ) -> SweepResult:
     result = SweepResult()
     for f in frequencies:
         waves = WaveGenerator.thesis_max(seed, frequency=f, ramp=1.0)
         span = _window(f, minimum_window)
         plan = HeavePlan(waves, off=span, on=span, settle=0.5, control=control or ControlConfig())
-        with EmbeddedRig(seed=seed, motors=SWEEP_MOTORS) as rig:
+        with EmbeddedRig(seed=seed, motors=SWEEP_MOTORS, plant=plant) as rig:
             res = asyncio.run(
                 run_session(
                     plan,
