@@ -47,11 +47,14 @@ def _shade(ax: Any, phases: dict[str, float]) -> None:
 
 def _fig_4_24(result: HeaveResult, phases: dict[str, float], folder: Path) -> Path:
     s = result.series
+    # the experiment only: not the robot's way to its start pose, nor the parking afterwards
+    keep = (s["t"] >= 0.0) & (s["t"] <= phases["end"] - phases["t0"])
+    t = s["t"][keep]
     fig, axes = new_figure(3, 1, figsize=(9, 8), sharex=True)
     for i, (ax, a) in enumerate(zip(axes, AXES, strict=True)):
         _shade(ax, phases)
-        ax.plot(s["t"], s["world"][:, i], lw=1.0, label="end-effector (world)")
-        ax.plot(s["t"], s["x_s"][:, i], lw=0.8, ls="--", color="k", label="set-point x_s")
+        ax.plot(t, s["world"][keep, i], lw=1.0, label="end-effector (world)")
+        ax.plot(t, s["x_s"][keep, i], lw=0.8, ls="--", color="k", label="set-point x_s")
         att = result.metrics.get(f"attenuation_rms_{a}", float("nan"))
         ax.set_ylabel(f"{a.upper()} (mm)")
         ax.set_title(f"{a.upper()}: RMS attenuation {att:.1f} %", fontsize=9, loc="right")
