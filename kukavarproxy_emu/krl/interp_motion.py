@@ -25,7 +25,7 @@ from . import ast
 from .runtime import KrlRuntimeError, is_number, render
 
 if TYPE_CHECKING:
-    from ..motion.kernel import MotionKernel
+    from ..motion.kernel import MotionKernel, PlanJob
     from ..store import VariableStore
     from .runtime import Evaluator
 
@@ -46,6 +46,7 @@ class MotionMixin:
     store: VariableStore
     ev: Evaluator
     at_once: int
+    _until: float
 
     def _stop_if_reads(self, *exprs: ast.Expr | None) -> Generator[str, None, None]:
         raise NotImplementedError  # provided by Interpreter
@@ -75,7 +76,11 @@ class MotionMixin:
             label = f"{stmt.kind} {render(stmt.target, self._index_text)}"
             approx = stmt.approx is not None
         try:
-            self._plan(kernel, stmt.kind, target, approx, label, stmt)
+            job = self._plan(kernel, stmt.kind, target, approx, label, stmt)
+            # A LIN is planned in slices within this cycle's time budget; the advance run
+            # stays on the statement until it is planned (or refused), as on a KRC.
+            while job is not None and not job.step(self._until):
+                yield WAIT
         except MotionRefused as exc:
             raise KrlRuntimeError(str(exc), stmt) from None
         if not kernel.moving:  # completed at once: the robot stands on the target
@@ -97,7 +102,8 @@ class MotionMixin:
         approx: bool,
         label: str,
         node: ast.Node,
-    ) -> None:
+    ) -> PlanJob | None:
+        """Plan the motion; a LIN comes back as a job still to be stepped."""
         if not isinstance(target, Struct):
             raise KrlRuntimeError(f"{kind} needs an AXIS/E6AXIS or POS/E6POS/FRAME target", node)
         relative = kind.endswith("_REL")
@@ -110,22 +116,21 @@ class MotionMixin:
                 kernel.ptp_rel(q, approx=approx, label=label)
             else:
                 kernel.ptp(q, approx=approx, label=label)
-            return
+            return None
         if not any(k in target for k in _POSE):
             raise KrlRuntimeError(f"{kind} target has neither A1..A6 nor X..C", node)
         if relative:
             inc = self._vector(target, _POSE, np.zeros(6), node)
             if kind == "PTP_REL":
                 kernel.ptp_rel_pose(inc, approx=approx, label=label)
-            else:
-                kernel.lin_rel(inc, approx=approx, label=label)
-            return
+                return None
+            return kernel.plan_lin_rel(inc, approx=approx, label=label)
         pose = self._vector(target, _POSE, kernel.planned_pose(), node)
         if kind == "PTP":
             s, t = target.get("S"), target.get("T")
             kernel.ptp_pose(pose, s=_int_or_none(s), t=_int_or_none(t), approx=approx, label=label)
-        else:
-            kernel.lin(pose, approx=approx, label=label)
+            return None
+        return kernel.plan_lin(pose, approx=approx, label=label)
 
     @staticmethod
     def _vector(target: Struct, keys: tuple[str, ...], base: Any, node: ast.Node) -> Any:

@@ -2,16 +2,21 @@
 
 Programs (the thesis followers, path runners, later the KRL interpreter) call the planning
 methods (:meth:`MotionKernel.ptp`, :meth:`~MotionKernel.lin`, their ``_rel`` forms); the kernel
-neither knows nor cares how the program is written. Each :meth:`~MotionKernel.tick` advances
+neither knows nor cares how the program is written. A LIN can also be planned in slices
+(:meth:`~MotionKernel.plan_lin` returns a :class:`PlanJob`), which the KRL advance run steps
+within its per-cycle time budget, so a long line never holds the event loop. Each :meth:`~MotionKernel.tick` advances
 the running segments by one IPO cycle and writes every motion variable of the store in one
 synchronous step, so a KVP read served by the same asyncio loop always sees one cycle.
 
 Model (see docs/emulator-robot.md):
 
 * planning at 100 % override; ``$OV_PRO`` scales the profile clock (speeds × ov, accelerations
-  × ov²), so an override change acts on the running motion too, slewed over ``OV_RAMP`` s;
-* approximation = superposition: the next segment starts while the current one decelerates
-  (``Segment.blend_start``) and the displacements add, which never exceeds a speed limit;
+  × ov²), so an override change acts on the running motion too, slewed as fast as the axis
+  accelerations allow (:meth:`MotionKernel._slew`);
+* a LIN's path velocity is limited so that no axis exceeds its speed or acceleration limit
+  (:mod:`.path`); a line through a singularity is refused;
+* approximation = superposition: the next segment starts at the ``$APO`` distance of the
+  current one and the displacements add, re-timed by :func:`.segments.blend` within limits;
 * the torque is gravity (link masses + ``$LOAD``) + a diagonal inertia × commanded
   acceleration + Jᵀ·``EMU_WRENCH``, all in the kinematics package's drive-torque convention.
 """
@@ -20,8 +25,10 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Generator, Sequence
+from typing import TypeVar
 
 import numpy as np
 
@@ -38,11 +45,12 @@ from pyopenshowvar.kinematics import (
 from pyopenshowvar.krl import Struct
 
 from ..store import VariableStore
-from .profiles import Trapezoid, ptp_profile, scalar_limits
+from .path import LinGeometry, PathLimits, PathRefused, joint_path
+from .profiles import FloatArray, Profile
 from .publish import Publisher
-from .segments import FloatArray, Kind, Segment, rotation_log, rotvec_matrix
+from .segments import ConstLimits, Kind, Segment, blend, rotation_log, rotvec_matrix
 
-__all__ = ["DEFAULT_INERTIA", "MotionKernel", "MotionRefused"]
+__all__ = ["DEFAULT_INERTIA", "MotionKernel", "MotionRefused", "PlanJob"]
 
 log = logging.getLogger(__name__)
 
@@ -50,19 +58,55 @@ log = logging.getLogger(__name__)
 #: point masses at mid reach for A1..A3, the wrist for A4..A6). Only the inertial *term* of
 #: $TORQUE_AXIS_ACT uses it, to show acceleration peaks; it is no dynamic model.
 DEFAULT_INERTIA = (2.0, 2.5, 0.7, 0.04, 0.04, 0.01)
-#: Seconds for the override to slew from 0 to 100 % while a motion runs (no speed jumps).
-OV_RAMP = 0.5
+#: Fraction of the axis accelerations an override change may use on top of the motion's own
+#: (the ramp is integrated per IPO cycle; the margin covers the discretisation).
+OV_MARGIN = 0.98
 #: KRC machine datum $APO_DIS_PTP (deg): 100 % C_PTP would start blending this far out.
 APO_DIS_PTP = 90.0
-#: A LIN is checked for reachability every this many mm (and degrees) at planning time.
-LIN_CHECK_STEP = 10.0
-#: A joint jump larger than this between two check points means a configuration flip.
-LIN_MAX_JUMP = 30.0
 TraceSample = tuple[float, FloatArray, FloatArray]
+T = TypeVar("T")
 
 
 class MotionRefused(Exception):
     """A motion the controller refuses (software limit, unreachable pose); text = message."""
+
+
+class PlanJob:
+    """A motion being planned in slices: :meth:`step` until it returns True.
+
+    Each :meth:`step` does at least one slice (an IK batch, a few hundred nodes of a pass) and
+    stops at ``deadline`` (``time.perf_counter()``); the motion is queued by the last slice.
+    A refused motion raises :class:`MotionRefused` from :meth:`step`.
+    """
+
+    def __init__(self, work: Generator[None, None, None]) -> None:
+        self._work = work
+        self.done = False
+        self.slices = 0
+
+    def step(self, deadline: float) -> bool:
+        while not self.done:
+            self.slices += 1
+            try:
+                next(self._work)
+            except StopIteration:
+                self.done = True
+            if time.perf_counter() >= deadline:
+                break
+        return self.done
+
+    def run(self) -> None:
+        """Plan to the end at once (in-process callers and tests)."""
+        self.step(math.inf)
+
+
+def next_result(gen: Generator[None, None, T]) -> T:
+    """Run a planning generator to its end at once and return its result."""
+    while True:
+        try:
+            next(gen)
+        except StopIteration as stop:
+            return stop.value  # type: ignore[no-any-return]
 
 
 def _xyzabc(value: object, what: str) -> FloatArray:
@@ -200,12 +244,15 @@ class MotionKernel(Publisher):
             return  # the robot stands on the target: the statement completes at once
         self.check_limits(q1, label)
         v, a = self._limits()
+        limits = ConstLimits(delta, v, a)
+        curve, bw = next_result(limits.plan())
         cptp = float(self._apo()["CPTP"])  # type: ignore[arg-type]
-        lead = float(np.max(np.abs(delta))) if np.any(delta) else 0.0
-        # $APO.CPTP % of $APO_DIS_PTP, at most half the segment (reference §5).
+        lead = float(np.max(np.abs(delta)))
+        # $APO.CPTP % of $APO_DIS_PTP on the leading axis, at most half the segment (§5).
         frac = min(0.5, cptp / 100.0 * APO_DIS_PTP / lead) if lead > 0 else 0.0
-        seg = Segment(Kind.PTP, ptp_profile(delta, v, a), delta, q1, approx, frac, label=label)
-        self._enqueue(seg)
+        profile = Profile(*curve) if curve[0].size > 1 else Profile.instant()
+        seg = Segment(Kind.PTP, profile, limits, bw, delta, q1, approx, frac, label=label)
+        next_result(self._enqueue(seg))
 
     def ptp_rel(self, delta: object, *, approx: bool = False, label: str = "PTP_REL") -> None:
         """Plan ``PTP_REL`` by an axis increment, added to the previous planned end point."""
@@ -263,55 +310,68 @@ class MotionKernel(Publisher):
 
     def lin(self, pose: object, *, approx: bool = False, label: str = "LIN") -> None:
         """Plan ``LIN pose [C_DIS]``: a straight TCP line in $BASE at ``$VEL.CP``."""
-        tool, base = self._frames = self._read_frames()
-        start = fk_matrix(self.model, self.planned_q, tool, base)
-        end = pose_to_matrix(_xyzabc(pose, label))
-        dp = end[:3, 3] - start[:3, 3]
-        rv = rotation_log(end[:3, :3] @ start[:3, :3].T)
-        length, angle = float(np.linalg.norm(dp)), math.degrees(float(np.linalg.norm(rv)))
-        if not self.active and not self.pending and length < 1e-9 and angle < 1e-9:
-            return
-        end_q = self._check_line(start, dp, rv, length, angle, label)
-        vel, acc = self.store.get("$VEL"), self.store.get("$ACC")
-        assert isinstance(vel, Struct) and isinstance(acc, Struct)
-        v = [float(vel["CP"]) * 1000.0, float(vel["ORI1"])]  # type: ignore[arg-type]
-        a = [float(acc["CP"]) * 1000.0, float(acc["ORI1"])]  # type: ignore[arg-type]
-        profile = Trapezoid.plan(*scalar_limits([length, angle], v, a))
-        cdis = float(self._apo()["CDIS"])  # type: ignore[arg-type]
-        frac = min(0.5, cdis / length) if length > 0 else 0.0
-        seg = Segment(Kind.LIN, profile, dp, end_q, approx, frac, rv, label)
-        self._enqueue(seg)
+        self.plan_lin(pose, approx=approx, label=label).run()
 
     def lin_rel(self, increment: object, *, approx: bool = False, label: str = "LIN_REL") -> None:
         """``LIN_REL`` by a Cartesian increment from the previous planned end point."""
         self.lin(self.rel_pose(increment), approx=approx, label=label)
 
-    def _check_line(
+    def plan_lin(self, pose: object, *, approx: bool = False, label: str = "LIN") -> PlanJob:
+        """``LIN pose`` as a :class:`PlanJob`: the target and $TOOL/$BASE/$VEL/$ACC/$APO are
+        read now; the joint path and its timing are computed by the job's slices."""
+        tool, base = frames = self._read_frames()
+        start = fk_matrix(self.model, self.planned_q, tool, base)
+        end = pose_to_matrix(_xyzabc(pose, label))
+        geo = LinGeometry(
+            start, end[:3, 3] - start[:3, 3], rotation_log(end[:3, :3] @ start[:3, :3].T)
+        )
+        vel, acc = self.store.get("$VEL"), self.store.get("$ACC")
+        assert isinstance(vel, Struct) and isinstance(acc, Struct)
+        v = (float(vel["CP"]) * 1000.0, float(vel["ORI1"]))  # type: ignore[arg-type]
+        a = (float(acc["CP"]) * 1000.0, float(acc["ORI1"]))  # type: ignore[arg-type]
+        cdis = float(self._apo()["CDIS"])  # type: ignore[arg-type]
+        frac = min(0.5, cdis / geo.length) if geo.length > 0 else 0.0
+        return PlanJob(self._plan_lin(geo, frames, v, a, approx, frac, label))
+
+    def plan_lin_rel(
+        self, increment: object, *, approx: bool = False, label: str = "LIN_REL"
+    ) -> PlanJob:
+        return self.plan_lin(self.rel_pose(increment), approx=approx, label=label)
+
+    def _plan_lin(
         self,
-        start: FloatArray,
-        dp: FloatArray,
-        rv: FloatArray,
-        length: float,
-        angle: float,
+        geo: LinGeometry,
+        frames: tuple[FloatArray, FloatArray],
+        v: tuple[float, float],
+        a: tuple[float, float],
+        approx: bool,
+        frac: float,
         label: str,
-    ) -> FloatArray:
-        """IK along the line at planning time: refuse a LIN that leaves the workspace or the
-        software limits, or flips configuration (a singularity) on the way."""
-        n = max(2, min(200, int(max(length, angle) / LIN_CHECK_STEP) + 2))
-        q = self.planned_q
-        for s in np.linspace(0.0, 1.0, n)[1:]:
-            pose = self._lin_pose(start, [(dp, rv, float(s))])
-            try:
-                q_next = inverse(
-                    self.model, pose, current=q, tool=self._frames[0], base=self._frames[1]
-                )
-            except UnreachableError as exc:
-                raise MotionRefused(f"{label}: path not reachable at {s:.0%}: {exc}") from None
-            if np.any(np.abs(q_next - q) > LIN_MAX_JUMP):
-                raise MotionRefused(f"{label}: path crosses a singularity near {s:.0%}")
-            q = q_next
-        self.check_limits(q, label)
-        return q
+    ) -> Generator[None, None, None]:
+        q0 = self.planned_q.copy()
+        if not self.active and not self.pending and geo.length < 1e-9 and geo.angle < 1e-9:
+            return
+        try:
+            s, q = yield from joint_path(self.model, geo, q0, *frames)
+            lo, hi = self._soft_limits()
+            outside = np.flatnonzero(np.any((q < lo[:6] - 1e-9) | (q > hi[:6] + 1e-9), axis=1))
+            if len(outside):
+                self.check_limits(q[outside[0]], f"{label} at {s[outside[0]]:.0%}")
+            limits = PathLimits(s, q, geo, v, a, self.model.max_speed, self.model.max_accel)
+            curve, bw = yield from limits.plan()
+            profile = Profile(*curve)
+        except PathRefused as exc:
+            raise MotionRefused(f"{label}: {exc}") from None
+        except ValueError as exc:  # a profile that stalls: too close to a singularity
+            raise MotionRefused(f"{label}: {exc}") from None
+        if not np.array_equal(q0, self.planned_q):
+            raise MotionRefused(f"{label}: the motions before it changed while it was planned")
+        rows = [(geo.dp, a[0]), (np.degrees(geo.rv), a[1])]
+        seg = Segment(
+            Kind.LIN, profile, limits, bw, geo.dp, q[-1].copy(), approx, frac, geo.rv, label, rows
+        )
+        self._frames = frames
+        yield from self._enqueue(seg)
 
     @staticmethod
     def _lin_pose(
@@ -323,7 +383,17 @@ class MotionKernel(Publisher):
             pose[:3, :3] = rotvec_matrix(rv * s) @ pose[:3, :3]
         return pose
 
-    def _enqueue(self, seg: Segment) -> None:
+    def _enqueue(self, seg: Segment) -> Generator[None, None, None]:
+        """Queue ``seg``, approximating the motion before it if that one allows it."""
+        before = self.pending[-1] if self.pending else (self.active[-1] if self.active else None)
+        if before is not None and before.approx:
+
+            def progress() -> float:
+                if before in self.pending:
+                    return 0.0
+                return before.progress if before in self.active else 1.0
+
+            yield from blend(before, seg, progress)
         self.pending.append(seg)
         self.planned_q = seg.end_q.copy()
 
@@ -332,6 +402,7 @@ class MotionKernel(Publisher):
         self.pending.clear()
         for seg in self.active:
             seg.approx = False
+            seg.blend_at = None
         if hard:
             self.active.clear()
             self._q_base = self.q.copy()
@@ -343,11 +414,7 @@ class MotionKernel(Publisher):
         dt = self.ipo
         ov = self.store.get("$OV_PRO")
         target = float(ov) / 100.0  # type: ignore[arg-type]
-        if self.active:  # slew: an override step must not become a speed step
-            step = dt / OV_RAMP
-            self.rate += max(-step, min(step, target - self.rate))
-        else:
-            self.rate = target
+        self.rate = self._slew(target, dt) if self.active else target
         q_old = self.q
         self._advance(dt * self.rate)
         q_new = self._position()
@@ -360,6 +427,36 @@ class MotionKernel(Publisher):
             self.trace.append((self.time, q_new.copy(), qd.copy()))
         self.publish()
 
+    def _slew(self, target: float, dt: float) -> float:
+        """The override rate for this cycle: towards ``target`` as fast as the axes allow.
+
+        With the profile clock running at rate ``r``, an axis moves at ``r·w`` and accelerates
+        at ``r²·α + ṙ·w`` (``w``, ``α``: its velocity and acceleration at 100 %). ``ṙ`` is
+        chosen as large as possible towards the target with every axis inside its limit, so an
+        override step never becomes an acceleration step.
+        """
+        rate = self.rate
+        want = (target - rate) / dt
+        if want == 0.0:
+            return rate
+        w = np.zeros(6)
+        alpha = np.zeros(6)
+        lim = np.full(6, np.inf)
+        for seg in self.active:
+            sw, sa = seg.rates()
+            w += sw
+            alpha += sa
+            lim = np.minimum(lim, seg.axis_accel() * OV_MARGIN)
+        moving = np.abs(w) > 1e-9
+        if not np.any(moving):
+            return target
+        base = rate * rate * alpha[moving]
+        b1 = (-lim[moving] - base) / w[moving]
+        b2 = (lim[moving] - base) / w[moving]
+        lo, hi = float(np.max(np.minimum(b1, b2))), float(np.min(np.maximum(b1, b2)))
+        rdot = min(max(want, min(lo, 0.0)), max(hi, 0.0))
+        return rate + rdot * dt
+
     def _start_next(self, carry: float, budget: float) -> bool:
         if not self.pending:
             return False
@@ -368,8 +465,8 @@ class MotionKernel(Publisher):
             last = self.active[-1]
             if len(self.active) > 1 or last.kind is not nxt.kind:
                 return False
-            start = last.blend_start(nxt)
-            if last.t < start:
+            start = last.blend_at
+            if start is None or last.t < start:
                 return False
             nxt.t = min(last.t - start, budget)
         else:
@@ -408,9 +505,9 @@ class MotionKernel(Publisher):
         if self.active[0].kind is Kind.PTP:
             q = self._q_base.copy()
             for seg in self.active:
-                q += seg.delta * seg.profile.s(seg.t)
+                q += seg.delta * seg.profile.s_at(seg.t)
             return q
-        parts = [(seg.delta, seg.rotvec, seg.profile.s(seg.t)) for seg in self.active]
+        parts = [(seg.delta, seg.rotvec, seg.profile.s_at(seg.t)) for seg in self.active]
         pose = self._lin_pose(self._lin_base, parts)
         try:
             q = inverse(

@@ -11,15 +11,27 @@ by the distance each one has to travel, so no axis ever exceeds its own speed or
 limit, and the axis that needs the most time sets the duration. Overrides are not baked in: the
 kernel plans at 100 % and runs the profile's clock at ``$OV_PRO`` % (time scaling), which
 scales every speed by the override and every acceleration by its square, as a KRC does.
+
+What the kernel runs is a :class:`Profile`: ``ṡ²`` as a piecewise-linear function of ``s``
+(the phase plane). A straight piece is a constant acceleration, so a trapezoid is three pieces,
+a LIN limited by its axes near a singularity is many, and re-timing the tail of a segment for an
+approximation is the pointwise minimum of two such functions (:func:`pl_min`): a curve below
+both is reachable whenever both are, since the speed never has to jump.
 """
 
 from __future__ import annotations
 
 import math
+from bisect import bisect_right
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-__all__ = ["Trapezoid", "ptp_profile", "scalar_limits"]
+import numpy as np
+import numpy.typing as npt
+
+__all__ = ["Profile", "Trapezoid", "pl_min", "ptp_profile", "ramp_curve", "scalar_limits"]
+
+FloatArray = npt.NDArray[np.float64]
 
 #: Distances below this (deg or mm) count as zero: a zero-length segment takes no time.
 EPS = 1e-9
@@ -127,3 +139,120 @@ def ptp_profile(
     others follow the same normalised profile and therefore stay within their own limits.
     """
     return Trapezoid.plan(*scalar_limits(delta, v_limits, a_limits))
+
+
+Curve = tuple[FloatArray, FloatArray]
+#: Nodes of a curve closer than this (in s) are merged: a sliver would divide by ~0.
+NODE_EPS = 1e-12
+
+
+def pl_min(a: Curve, b: Curve) -> Curve:
+    """Pointwise minimum of two piecewise-linear curves ``(s, x)`` over the span of ``a``.
+
+    ``b`` is evaluated by linear interpolation (held constant beyond its ends). The result has
+    a node wherever either curve has one and wherever they cross, so it is exact.
+    """
+    sa, xa = a
+    sb, xb = b
+    inside = sb[(sb > sa[0]) & (sb < sa[-1])]
+    s = np.union1d(sa, inside)
+    d = np.interp(s, sa, xa) - np.interp(s, sb, xb)
+    k = np.flatnonzero(d[:-1] * d[1:] < 0.0)
+    if len(k):
+        s = np.union1d(s, s[k] + (s[k + 1] - s[k]) * d[k] / (d[k] - d[k + 1]))
+    keep = np.concatenate([[True], np.diff(s) > NODE_EPS])
+    keep[-1] = True
+    s = s[keep]
+    s[-1] = sa[-1]
+    return s, np.minimum(np.interp(s, sa, xa), np.interp(s, sb, xb))
+
+
+def ramp_curve(s0: float, x0: float, s1: float, x1: float, x_max: float, a_max: float) -> Curve:
+    """The fastest constant-limit profile from ``(s0, ṡ²=x0)`` to ``(s1, x1)``: accelerate at
+    ``a_max``, cruise at ``√x_max``, decelerate at ``a_max`` (a trapezoid, or a triangle).
+
+    Raises ``ValueError`` when the end state cannot be reached (too fast to stop in time).
+    """
+    span = s1 - s0
+    if x0 > x1 + 2.0 * a_max * span + 1e-12 or x1 > x0 + 2.0 * a_max * span + 1e-12:
+        raise ValueError("the end speed cannot be reached within the distance")
+    ends = np.array([s0, s1])
+    forward = (ends, np.array([x0, x0 + 2.0 * a_max * span]))
+    backward = (ends, np.array([x1 + 2.0 * a_max * span, x1]))
+    cap = (ends, np.array([x_max, x_max]))
+    return pl_min(pl_min(forward, backward), cap)
+
+
+class Profile:
+    """A motion's path parameter over time, from its phase-plane curve ``ṡ² = x(s)``.
+
+    Between two nodes the acceleration is constant, so ``s(t)`` is exact (no integration
+    error) and the time of each node is ``2·Δs / (ṡ_k + ṡ_k+1)``. ``Profile.instant()`` is a
+    zero-length motion (``duration == 0``).
+    """
+
+    __slots__ = ("_s", "_t", "_x", "duration", "s", "t", "x")
+
+    def __init__(self, s: FloatArray, x: FloatArray) -> None:
+        self.s = np.asarray(s, dtype=np.float64)
+        self.x = np.maximum(np.asarray(x, dtype=np.float64), 0.0)
+        v = np.sqrt(self.x)
+        span = np.diff(self.s)
+        speed = v[:-1] + v[1:]
+        if np.any((speed <= 0.0) & (span > 0.0)):
+            raise ValueError("the profile stops inside the motion")
+        dt = np.divide(2.0 * span, speed, out=np.zeros_like(span), where=span > 0.0)
+        self.t = np.concatenate([[0.0], np.cumsum(dt)])
+        self.duration = float(self.t[-1])
+        # plain lists: bisect on them is several times faster than numpy for one lookup
+        self._t, self._s, self._x = self.t.tolist(), self.s.tolist(), self.x.tolist()
+
+    @classmethod
+    def instant(cls) -> Profile:
+        return cls(np.array([1.0]), np.array([0.0]))
+
+    @classmethod
+    def trapezoid(cls, v_max: float, a_max: float) -> Profile:
+        """The rest-to-rest profile of :meth:`Trapezoid.plan` (inf limits = no motion)."""
+        if math.isinf(v_max) and math.isinf(a_max):
+            return cls.instant()
+        return cls(*ramp_curve(0.0, 0.0, 1.0, 0.0, v_max * v_max, a_max))
+
+    def curve(self) -> Curve:
+        return self.s, self.x
+
+    def _piece(self, t: float) -> tuple[int, float]:
+        k = min(bisect_right(self._t, t) - 1, len(self._t) - 2)
+        return k, t - self._t[k]
+
+    def _accel(self, k: int) -> float:
+        span = self._s[k + 1] - self._s[k]
+        return (self._x[k + 1] - self._x[k]) / (2.0 * span) if span > 0.0 else 0.0
+
+    def at(self, t: float) -> tuple[float, float, float]:
+        """``(s, ṡ, s̈)`` at time ``t`` (clamped to the profile)."""
+        if t >= self.duration:
+            return self._s[-1], 0.0, 0.0
+        if t <= 0.0:
+            return self._s[0], math.sqrt(self._x[0]), 0.0
+        k, tau = self._piece(t)
+        v0, u = math.sqrt(self._x[k]), self._accel(k)
+        s = min(self._s[k] + v0 * tau + 0.5 * u * tau * tau, self._s[k + 1])
+        return s, max(v0 + u * tau, 0.0), u
+
+    def s_at(self, t: float) -> float:
+        return self.at(t)[0]
+
+    def x_at(self, s: float) -> float:
+        """``ṡ²`` where the path parameter is ``s``."""
+        return float(np.interp(s, self.s, self.x))
+
+    def time_at(self, s: float) -> float:
+        """When the path parameter reaches ``s``."""
+        if s <= self._s[0]:
+            return 0.0
+        if s >= self._s[-1]:
+            return self.duration
+        k = bisect_right(self._s, s) - 1
+        v0, v1 = math.sqrt(self._x[k]), math.sqrt(self.x_at(s))
+        return float(self._t[k] + 2.0 * (s - self._s[k]) / (v0 + v1))

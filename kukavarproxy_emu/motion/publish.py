@@ -30,7 +30,7 @@ from pyopenshowvar.kinematics import (
 from pyopenshowvar.krl import E6Axis, E6Pos, Struct
 
 from ..store import VariableStore
-from .segments import FloatArray
+from .profiles import FloatArray
 
 if TYPE_CHECKING:
     from ..plant import Plant

@@ -1,0 +1,347 @@
+"""LIN planning: the joint path of a straight TCP line and its limits along the path.
+
+A KRC plans a CP motion so that no axis exceeds its limits: near a singularity the path velocity
+drops instead of an axis overspeeding (KSS ``$CP_VEL_TYPE = #VAR_ALL``), and a line that really
+passes through a singularity is refused. The emulator does the same in two stages, both
+generators that yield after a bounded slice of work, so the advance run can spread a long LIN
+over several IPO cycles instead of holding the event loop:
+
+1. :func:`joint_path` samples the line every ``LIN_STEP`` mm/deg and solves it with IK in
+   batches, in the start's configuration (the S bits: a continuous motion cannot change them
+   without passing a singularity), each solution unwrapped to the multi-turn value nearest its
+   neighbour. Intervals where an axis moves more than ``MAX_STEP`` degrees are bisected until it
+   does not. An interval shorter than ``MIN_STEP`` that still jumps is a discontinuity of the
+   joint path: the line crosses a singularity, and the LIN is refused.
+2. :class:`PathLimits` turns the nodes into the bounds of the path parameter ``s``: a cap on
+   ``ṡ`` from ``$VEL.CP``/``ORI1`` and every axis speed (the joint path is linear between nodes,
+   so capping both ends of an interval bounds the whole interval), and bounds on ``s̈`` from
+   ``$ACC.CP``/``ORI1`` and every axis acceleration ``q'·s̈ + q''·ṡ²``, which depend on ``ṡ²``
+   through the path's curvature. Its :meth:`~PathLimits.backward` / :meth:`~PathLimits.forward`
+   passes integrate the fastest profile within them in the phase plane (time-optimal path
+   parameterisation by numerical integration).
+
+We integrate the phase plane ourselves instead of calling a TOPP library (toppra): the passes
+must yield every few hundred nodes to keep the event loop free, and they work on the exact IK
+nodes rather than a spline through them, which would overshoot at a singular wrist swing.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Generator
+
+import numpy as np
+
+from pyopenshowvar.kinematics import RobotModel, UnreachableError, inverse, status_turn
+
+from .profiles import Curve, FloatArray, pl_min
+
+__all__ = ["LinGeometry", "PathLimits", "PathRefused", "joint_path"]
+
+#: Coarse sampling of the line (mm, or degrees of orientation).
+LIN_STEP = 5.0
+#: No axis moves more than this (deg) between two nodes of the joint path.
+MAX_STEP = 2.0
+#: An interval this short (mm or deg) that still jumps is a discontinuity: a singularity.
+MIN_STEP = 1e-3
+#: A path needing more nodes than this runs too close to a singularity to be planned.
+MAX_NODES = 6000
+#: Poses per IK batch (about 1 ms each).
+IK_BATCH = 64
+#: Nodes per slice of the phase-plane passes.
+PASS_CHUNK = 200
+#: Fractions of the axis limits the planner uses: the IK path bends slightly between nodes.
+SPEED_MARGIN = 0.99
+ACCEL_MARGIN = 0.95
+_BIG = 1e30
+
+
+class PathRefused(Exception):
+    """The line cannot be run; the text says why (the kernel prefixes the statement)."""
+
+
+class LinGeometry:
+    """The straight TCP line of a LIN: ``pose(s) = (p0 + s·dp, Rot(s·rv)·R0)`` in $BASE."""
+
+    def __init__(self, start: FloatArray, dp: FloatArray, rv: FloatArray) -> None:
+        self.start = start
+        self.dp = dp
+        self.rv = rv
+        self.length = float(np.linalg.norm(dp))
+        self.angle = math.degrees(float(np.linalg.norm(rv)))
+
+    @property
+    def scale(self) -> float:
+        """mm (or deg) per unit of s: what ``LIN_STEP`` and ``MIN_STEP`` measure."""
+        return max(self.length, self.angle)
+
+    def poses(self, s: FloatArray) -> FloatArray:
+        """The TCP poses ``(n, 4, 4)`` at path parameters ``s``."""
+        n = len(s)
+        out = np.broadcast_to(self.start, (n, 4, 4)).copy()
+        out[:, :3, 3] += s[:, None] * self.dp
+        theta = float(np.linalg.norm(self.rv))
+        if theta > 1e-15:
+            k = self.rv / theta
+            kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+            a = theta * s
+            rot = (
+                np.eye(3)
+                + np.sin(a)[:, None, None] * kx
+                + (1.0 - np.cos(a))[:, None, None] * (kx @ kx)
+            )
+            out[:, :3, :3] = rot @ self.start[:3, :3]
+        return out
+
+
+def _chain(q0: FloatArray, q: FloatArray) -> FloatArray:
+    """Unwrap a joint path: each step taken as its equivalent in (-180, 180]."""
+    step = np.diff(np.vstack([q0, q[1:]]), axis=0)
+    step = step - 360.0 * np.round(step / 360.0)
+    return np.vstack([q0, q0 + np.cumsum(step, axis=0)])
+
+
+def _singularity(model: RobotModel, q: FloatArray) -> str:
+    """Which of the KSS singularities a joint position is near."""
+    if abs(q[4]) < 10.0:
+        return "α5 (wrist axes, A5 = 0)"
+    if abs(q[2] - model.status_phi) < 10.0:
+        return "α2 (arm stretched)"
+    return "α1 (wrist centre above axis 1)"
+
+
+def joint_path(
+    model: RobotModel,
+    geo: LinGeometry,
+    q0: FloatArray,
+    tool: FloatArray,
+    base: FloatArray,
+) -> Generator[None, None, tuple[FloatArray, FloatArray]]:
+    """Nodes ``(s, q)`` of the joint path along the line, yielding after each IK batch.
+
+    Raises :class:`PathRefused` when a pose is out of reach or the line crosses a singularity.
+    """
+    config = int(status_turn(model, q0)[0])
+
+    def solve(s: FloatArray, near: FloatArray) -> FloatArray:
+        return inverse(
+            model, geo.poses(s), s=config, current=near, tool=tool, base=base, errors="nan"
+        )
+
+    def unreachable(s: float) -> PathRefused:
+        try:
+            inverse(model, geo.poses(np.array([s]))[0], s=config, tool=tool, base=base)
+        except UnreachableError as exc:
+            return PathRefused(f"path not reachable at {s:.0%}: {exc}")
+        return PathRefused(f"path not reachable at {s:.0%}")
+
+    n = max(2, math.ceil(geo.scale / LIN_STEP) + 1)
+    s = np.linspace(0.0, 1.0, n)
+    q = np.empty((n, 6))
+    q[0] = q0
+    q[-1] = solve(s[-1:], q0)  # the target first: an unreachable one is refused at once
+    if np.isnan(q[-1, 0]):
+        raise unreachable(1.0)
+    for i in range(1, n - 1, IK_BATCH):
+        j = min(i + IK_BATCH, n - 1)
+        q[i:j] = solve(s[i:j], q0)
+        yield
+    bad = np.flatnonzero(np.isnan(q[:, 0]))
+    if len(bad):
+        raise unreachable(float(s[bad[0]]))
+    q = _chain(q0, q)
+    while True:
+        jump = np.max(np.abs(np.diff(q, axis=0)), axis=1)
+        wide = np.flatnonzero(jump > MAX_STEP)
+        if not len(wide):
+            return s, q
+        short = wide[(s[wide + 1] - s[wide]) * geo.scale < MIN_STEP]
+        if len(short):
+            k = int(short[0])
+            where = _singularity(model, q[k])
+            raise PathRefused(f"path crosses the {where} singularity near {s[k]:.0%}")
+        if len(s) + len(wide) > MAX_NODES:
+            k = int(wide[np.argmax(jump[wide])])
+            where = _singularity(model, q[k])
+            raise PathRefused(f"path runs too close to the {where} singularity near {s[k]:.0%}")
+        mid = 0.5 * (s[wide] + s[wide + 1])
+        qm = np.empty((len(wide), 6))
+        for i in range(0, len(wide), IK_BATCH):
+            qm[i : i + IK_BATCH] = solve(mid[i : i + IK_BATCH], q[wide[i : i + IK_BATCH]])
+            yield
+        lost = np.flatnonzero(np.isnan(qm[:, 0]))
+        if len(lost):
+            raise unreachable(float(mid[lost[0]]))
+        order = np.argsort(np.concatenate([s, mid]), kind="stable")
+        s = np.concatenate([s, mid])[order]
+        q = _chain(q0, np.vstack([q, qm])[order])
+
+
+class PathLimits:
+    """Speed cap and acceleration bounds of the path parameter at each node of a LIN.
+
+    ``v_cart``/``a_cart`` are (mm/s, deg/s) and (mm/s², deg/s²) of ``$VEL``/``$ACC`` (CP and
+    ORI1); ``v_axis``/``a_axis`` the axis limits (deg/s, deg/s²). At node ``k`` every limit
+    reads ``α_j + β_j·ṡ² ≤ s̈ ≤ γ_j + β_j·ṡ²``, and ``xcap[k]`` is the largest ``ṡ²`` at which
+    the speed limits hold and these bounds still leave room for some ``s̈``.
+    """
+
+    def __init__(
+        self,
+        s: FloatArray,
+        q: FloatArray,
+        geo: LinGeometry,
+        v_cart: tuple[float, float],
+        a_cart: tuple[float, float],
+        v_axis: FloatArray,
+        a_axis: FloatArray,
+    ) -> None:
+        self.s, self.q = s, q
+        span = np.diff(s)
+        self.chord = np.diff(q, axis=0) / span[:, None]  # deg per unit s, per interval
+        qp = np.empty_like(q)
+        qp[0], qp[-1] = self.chord[0], self.chord[-1]
+        w0, w1 = span[:-1, None], span[1:, None]
+        qp[1:-1] = (self.chord[:-1] * w1 + self.chord[1:] * w0) / (w0 + w1)
+        qpp = np.zeros_like(q)
+        if len(span) > 1:
+            qpp[1:-1] = (self.chord[1:] - self.chord[:-1]) / (0.5 * (w0 + w1))
+            qpp[0], qpp[-1] = qpp[1], qpp[-2]
+            # the curvature changes fast near a singularity: bound each node by its neighbours'
+            near = np.stack([np.roll(qpp, 1, axis=0), qpp, np.roll(qpp, -1, axis=0)])
+            near[0, 0], near[2, -1] = qpp[0], qpp[-1]
+            pick = np.argmax(np.abs(near), axis=0)
+            qpp = np.take_along_axis(near, pick[None], axis=0)[0]
+        self.qp, self.qpp = qp, qpp
+
+        def per_unit(limits: tuple[float, float]) -> float:
+            out = math.inf
+            for dist, lim in zip((geo.length, geo.angle), limits, strict=True):
+                if dist > 1e-9:
+                    out = min(out, lim / dist)
+            return out
+
+        v_cp, a_cp = per_unit(v_cart), per_unit(a_cart)
+        # speed: both chords next to a node cap it
+        with np.errstate(divide="ignore"):
+            v_int = np.min(v_axis * SPEED_MARGIN / np.abs(self.chord), axis=1)
+        v_node = np.minimum(np.append(v_int, v_int[-1]), np.insert(v_int, 0, v_int[0]))
+        xcap = np.minimum(v_node, v_cp) ** 2
+        # acceleration rows: 6 axes + the Cartesian one
+        amax = self.a_axis = a_axis * ACCEL_MARGIN
+        ap = np.abs(qp)
+        moving = ap > 1e-9
+        with np.errstate(divide="ignore", invalid="ignore"):
+            gam = np.where(moving, amax / ap, _BIG)
+            beta = np.where(moving, -qpp / qp, 0.0)
+            still = np.where(~moving & (np.abs(qpp) > 0), amax / np.abs(qpp), np.inf)
+        a_s = min(a_cp, _BIG)
+        gam = np.hstack([gam, np.full((len(s), 1), a_s)])
+        beta = np.hstack([beta, np.zeros((len(s), 1))])
+        alp = -gam
+        # (β_j − β_m)·x ≤ γ_m − α_j for every pair of a lower and an upper bound
+        db = beta[:, :, None] - beta[:, None, :]
+        room = gam[:, None, :] - alp[:, :, None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pair = np.where(db > 0, room / db, np.inf)
+        xcap = np.minimum(xcap, np.min(pair, axis=(1, 2)))
+        xcap = np.minimum(xcap, np.min(still, axis=1))
+        self.xcap = xcap
+        self._alp, self._beta, self._gam = alp.tolist(), beta.tolist(), gam.tolist()
+        self._s, self._cap = s.tolist(), xcap.tolist()
+
+    # --- bounds ---------------------------------------------------------------------------
+    def _lo(self, k: int, x: float) -> float:
+        return float(max(a + b * x for a, b in zip(self._alp[k], self._beta[k], strict=True)))
+
+    def _hi(self, k: int, x: float) -> float:
+        return float(min(g + b * x for g, b in zip(self._gam[k], self._beta[k], strict=True)))
+
+    def xcap_on(self, s0: float, s1: float) -> float:
+        """The lowest speed cap (ṡ²) over ``[s0, s1]``."""
+        k0 = max(int(np.searchsorted(self.s, s0, side="right")) - 1, 0)
+        k1 = int(np.searchsorted(self.s, s1, side="left"))
+        return float(np.min(self.xcap[k0 : k1 + 1]))
+
+    def derivatives(self, s: float) -> tuple[FloatArray, FloatArray]:
+        """``dq/ds`` and ``d²q/ds²`` (deg) where the path parameter is ``s``."""
+        k = min(max(int(np.searchsorted(self.s, s, side="right")) - 1, 0), len(self.chord) - 1)
+        return self.chord[k], self.qpp[k]
+
+    # --- phase-plane passes ---------------------------------------------------------------
+    def backward(
+        self, s_end: float, x_end: float, above: Curve | None = None
+    ) -> Generator[None, None, Curve]:
+        """Fastest approach to ``(s_end, ṡ² = x_end)`` from earlier nodes, decelerating as hard
+        as the bounds allow. With ``above``, stops at the first node where the curve reaches
+        ``above`` (from there on ``above`` is the lower one); returns the curve on its span."""
+        s_list, cap = self._s, self._cap
+        k = int(np.searchsorted(self.s, s_end, side="left")) - 1
+        ss, xs = [s_end], [x_end]
+        s_next, x_next, k_next = s_end, x_end, min(k + 1, len(s_list) - 1)
+        lim_next = max(x_end, cap[k_next])
+        count = 0
+        while k >= 0:
+            d = s_next - s_list[k]
+            cand = x_next - 2.0 * d * self._lo(k_next, x_next)
+            for a, b in zip(self._alp[k], self._beta[k], strict=True):
+                den = 1.0 + 2.0 * d * b
+                if den > 0.0:
+                    cand = min(cand, (x_next - 2.0 * d * a) / den)
+            if cand > cap[k] and x_next < lim_next:
+                # the braking line meets the speed cap inside the interval: keep that corner
+                f = (lim_next - x_next) / ((lim_next - x_next) + (cand - cap[k]))
+                ss.append(s_next - f * d)
+                xs.append(x_next + f * (cand - x_next))
+            x = min(cap[k], cand)
+            ss.append(s_list[k])
+            xs.append(x)
+            if above is not None and x >= float(np.interp(s_list[k], *above)):
+                break
+            s_next, x_next, k_next, lim_next = s_list[k], x, k, cap[k]
+            k -= 1
+            count += 1
+            if count % PASS_CHUNK == 0:
+                yield
+        return np.array(ss[::-1]), np.array(xs[::-1])
+
+    def forward(self, s_start: float, x_start: float, below: Curve) -> Generator[None, None, Curve]:
+        """Fastest profile from ``(s_start, x_start)`` to the end, accelerating as hard as the
+        bounds allow but never above ``below`` (the backward curve, which decelerates in time).
+        Raises :class:`PathRefused` if the path speed would fall to zero on the way."""
+        s_list, cap = self._s, self._cap
+        k = int(np.searchsorted(self.s, s_start, side="right"))
+        ss, xs = [s_start], [x_start]
+        s_prev, x_prev, k_prev = s_start, x_start, max(k - 1, 0)
+        limit = np.minimum(np.interp(self.s, *below), self.xcap).tolist()
+        lim_prev = max(x_start, min(cap[k_prev], float(np.interp(s_start, *below))))
+        count = 0
+        while k < len(s_list):
+            d = s_list[k] - s_prev
+            cand = x_prev + 2.0 * d * self._hi(k_prev, x_prev)
+            for g, b in zip(self._gam[k], self._beta[k], strict=True):
+                den = 1.0 - 2.0 * d * b
+                if den > 0.0:
+                    cand = min(cand, (x_prev + 2.0 * d * g) / den)
+            if cand > limit[k] and x_prev < lim_prev:
+                # the acceleration line meets the limit curve inside the interval
+                f = (lim_prev - x_prev) / ((lim_prev - x_prev) + (cand - limit[k]))
+                ss.append(s_prev + f * d)
+                xs.append(x_prev + f * (cand - x_prev))
+            x = min(limit[k], cand)
+            if x <= 0.0 and k < len(s_list) - 1:
+                raise PathRefused(f"path speed falls to zero near {s_list[k]:.0%}")
+            ss.append(s_list[k])
+            xs.append(max(x, 0.0))
+            s_prev, x_prev, k_prev, lim_prev = s_list[k], x, k, limit[k]
+            k += 1
+            count += 1
+            if count % PASS_CHUNK == 0:
+                yield
+        return np.array(ss), np.array(xs)
+
+    def plan(self) -> Generator[None, None, tuple[Curve, Curve]]:
+        """The rest-to-rest profile: ``(profile curve, backward curve)``."""
+        bw = yield from self.backward(1.0, 0.0)
+        fw = yield from self.forward(0.0, 0.0, bw)
+        return pl_min(fw, bw), bw
