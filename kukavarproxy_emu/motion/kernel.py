@@ -58,9 +58,8 @@ log = logging.getLogger(__name__)
 #: point masses at mid reach for A1..A3, the wrist for A4..A6). Only the inertial *term* of
 #: $TORQUE_AXIS_ACT uses it, to show acceleration peaks; it is no dynamic model.
 DEFAULT_INERTIA = (2.0, 2.5, 0.7, 0.04, 0.04, 0.01)
-#: Fraction of the axis accelerations an override change may use on top of the motion's own
-#: (the ramp is integrated per IPO cycle; the margin covers the discretisation).
-OV_MARGIN = 0.98
+#: Bisection steps for the override rate of one cycle (resolution 2⁻¹² of the change).
+OV_BISECT = 12
 #: KRC machine datum $APO_DIS_PTP (deg): 100 % C_PTP would start blending this far out.
 APO_DIS_PTP = 90.0
 TraceSample = tuple[float, FloatArray, FloatArray]
@@ -430,32 +429,37 @@ class MotionKernel(Publisher):
     def _slew(self, target: float, dt: float) -> float:
         """The override rate for this cycle: towards ``target`` as fast as the axes allow.
 
-        With the profile clock running at rate ``r``, an axis moves at ``r·w`` and accelerates
-        at ``r²·α + ṙ·w`` (``w``, ``α``: its velocity and acceleration at 100 %). ``ṙ`` is
-        chosen as large as possible towards the target with every axis inside its limit, so an
-        override step never becomes an acceleration step.
+        The profile clock runs at rate ``r``: this cycle moves each segment by ``r·dt`` of its
+        profile, so the set-point velocity is ``r·w`` (``w``: the mean velocity at 100 % over
+        that step). ``r`` moves towards the target only as far as keeps every axis' change of
+        set-point velocity within its acceleration limit: an override step never becomes an
+        acceleration step.
         """
         rate = self.rate
-        want = (target - rate) / dt
-        if want == 0.0:
+        if target == rate:
             return rate
-        w = np.zeros(6)
-        alpha = np.zeros(6)
         lim = np.full(6, np.inf)
         for seg in self.active:
-            sw, sa = seg.rates()
-            w += sw
-            alpha += sa
-            lim = np.minimum(lim, seg.axis_accel() * OV_MARGIN)
-        moving = np.abs(w) > 1e-9
-        if not np.any(moving):
+            lim = np.minimum(lim, seg.axis_accel())
+        qd_old = self.qd
+
+        def excess(r: float) -> float:
+            step = dt * max(r, 1e-9)
+            qd = r * sum((seg.mean_velocity(step) for seg in self.active), np.zeros(6))
+            return float(np.max(np.abs(qd - qd_old) - lim * dt))
+
+        if excess(target) <= 0.0:
             return target
-        base = rate * rate * alpha[moving]
-        b1 = (-lim[moving] - base) / w[moving]
-        b2 = (lim[moving] - base) / w[moving]
-        lo, hi = float(np.max(np.minimum(b1, b2))), float(np.min(np.maximum(b1, b2)))
-        rdot = min(max(want, min(lo, 0.0)), max(hi, 0.0))
-        return rate + rdot * dt
+        # Without a change the motion keeps within its limits (up to rounding): allow that much.
+        allowed = max(excess(rate), 0.0)
+        ok, bad = rate, target
+        for _ in range(OV_BISECT):
+            mid = 0.5 * (ok + bad)
+            if excess(mid) <= allowed:
+                ok = mid
+            else:
+                bad = mid
+        return ok
 
     def _start_next(self, carry: float, budget: float) -> bool:
         if not self.pending:

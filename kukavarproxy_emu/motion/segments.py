@@ -119,11 +119,17 @@ class Segment:
         """Where along its path the segment is (0..1)."""
         return self.profile.s_at(self.t)
 
-    def rates(self) -> tuple[FloatArray, FloatArray]:
-        """Axis velocity (deg/s) and acceleration (deg/s²) of this segment now, at 100 %."""
-        s, v, u = self.profile.at(self.t)
+    def rates(self, t: float | None = None) -> tuple[FloatArray, FloatArray]:
+        """Axis velocity (deg/s) and acceleration (deg/s²) at 100 %, now or at profile time t."""
+        s, v, u = self.profile.at(self.t if t is None else t)
         qp, qpp = self.limits.derivatives(s)
         return qp * v, qp * u + qpp * (v * v)
+
+    def mean_velocity(self, dtau: float) -> FloatArray:
+        """Mean axis velocity (deg per s of profile time) over the next ``dtau`` of profile."""
+        s0, s1 = self.profile.s_at(self.t), self.profile.s_at(self.t + dtau)
+        qp, _ = self.limits.derivatives(0.5 * (s0 + s1))
+        return qp * ((s1 - s0) / dtau)
 
     def axis_accel(self) -> FloatArray:
         """The axis acceleration limits this segment was planned with (deg/s²)."""
