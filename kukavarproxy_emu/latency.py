@@ -2,12 +2,19 @@
 
 A real KUKAVARPROXY is one VB6 thread: every request of every client waits for the previous
 one, and each request costs a CrossComm round trip of a few milliseconds (reference §2.5, §6).
-This module reproduces that in two parts:
+This module reproduces that in three parts:
 
 * :class:`LatencyProfile` is a pure sampler — ``sample(kind, rng) -> seconds`` — so tests can
   check its medians over many samples without sleeping;
-* :class:`ServiceQueue` is the one global "proxy thread": an :class:`asyncio.Lock` shared by all
-  connections, held for the sampled service time of each request.
+* :class:`Scheduler` is the one global "proxy thread" as pure arithmetic: a request that arrives
+  at ``t`` starts when the worker is free (``max(t, previous deadline)``) and is answered at an
+  absolute deadline ``start + sample``; back-to-back requests chain, none is answered early;
+* :class:`DeadlineTimer` wakes the event loop *at* a deadline. ``asyncio.sleep`` rounds its
+  timeout up to the selector's 1 ms and wakes late by another fraction of a millisecond, which
+  shifted every reply by ~1 ms (a paced client saw 3.5 ms instead of 2.3 ms); a timer thread
+  sleeping on a monotonic condition wait is accurate to ~0.1 ms and costs nothing while idle.
+
+:class:`ServiceQueue` ties them together for the server.
 
 The profiles and their parameters are documented in ``docs/emulator.md``.
 """
@@ -15,16 +22,24 @@ The profiles and their parameters are documented in ``docs/emulator.md``.
 from __future__ import annotations
 
 import asyncio
+import heapq
+import itertools
 import math
 import random
+import statistics
+import threading
+import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal, TypeVar
 
 __all__ = [
     "PROFILES",
+    "DeadlineTimer",
     "Kind",
     "LatencyProfile",
+    "Scheduler",
     "ServiceQueue",
     "ServiceTime",
     "resolve_profile",
@@ -32,10 +47,6 @@ __all__ = [
 
 Kind = Literal["read", "write"]
 T = TypeVar("T")
-
-#: A wake-up later than this after the previous request's end counts as the loop's timer
-#: granularity (asyncio rounds timeouts to ~1 ms), not as idle time; see ServiceQueue.run.
-_CATCH_UP = 0.002
 
 
 @dataclass(frozen=True, slots=True)
@@ -137,34 +148,116 @@ def resolve_profile(spec: str | LatencyProfile | None) -> LatencyProfile | None:
         raise ValueError(f"unknown latency profile {spec!r} (choose from {choices})") from None
 
 
-class ServiceQueue:
-    """The single proxy worker shared by every connection of one emulator.
+class Scheduler:
+    """Deadlines of the single proxy worker (pure: no clock, no sleeping).
 
-    ``run`` waits its turn (asyncio.Lock wakes waiters in FIFO order), holds the worker for one
-    sampled service time and then computes the reply, so N busy clients each see about N times
-    the single-client latency, as on the real controller.
+    ``reserve(kind, arrival)`` is called when a request reaches the worker's queue, in arrival
+    order. The worker starts it when it is free — at ``arrival`` if idle, else at the previous
+    deadline — and answers it ``sample`` seconds later. So an isolated request's reply time is
+    exactly its sample, whatever the client's pacing, and a busy worker's throughput is the
+    profile's mean (no drift, no early reply).
     """
 
     def __init__(self, profile: LatencyProfile, rng: random.Random) -> None:
         self.profile = profile
         self.rng = rng
-        self._lock = asyncio.Lock()
-        self._last_end = 0.0
+        self.free_at = -math.inf
+
+    def reserve(self, kind: Kind, arrival: float) -> float:
+        start = max(arrival, self.free_at)
+        self.free_at = start + self.profile.sample(kind, self.rng)
+        return self.free_at
+
+
+class DeadlineTimer:
+    """Completes asyncio futures at absolute ``time.monotonic()`` deadlines.
+
+    One daemon thread waits on a condition with a timeout (a precise monotonic wait, unlike the
+    selector's millisecond timeout) for the earliest deadline, then hands the future back to its
+    loop with ``call_soon_threadsafe``, which wakes the loop at once. Waking a thread and then
+    the loop still takes a little while (~0.1 ms on a quiet machine, more under load), so the
+    timer measures that delay and aims early by its running median (overshoot compensation,
+    at most ``MAX_LEAD``): the typical wake-up lands on the deadline instead of after it. The
+    thread starts with the first deadline and stops after ``IDLE`` seconds without one.
+    """
+
+    IDLE = 5.0
+    #: Never aim earlier than this before a deadline (s).
+    MAX_LEAD = 0.0005
+    #: Wake-ups the compensation's median is taken over.
+    WINDOW = 64
+
+    def __init__(self) -> None:
+        self._cond = threading.Condition()
+        self._heap: list[tuple[float, int, asyncio.AbstractEventLoop, asyncio.Future[None]]] = []
+        self._seq = itertools.count()
+        self._thread: threading.Thread | None = None
+        self._late: deque[float] = deque(maxlen=self.WINDOW)
+        #: How early the timer aims now (s): the median delay of the recent wake-ups.
+        self.lead = 0.0
+
+    async def wait_until(self, deadline: float) -> None:
+        """Return at ``deadline`` (``time.monotonic()`` seconds); at once if it has passed."""
+        aim = deadline - self.lead
+        if aim <= time.monotonic():
+            return
+        loop = asyncio.get_running_loop()
+        fut: asyncio.Future[None] = loop.create_future()
+        with self._cond:
+            heapq.heappush(self._heap, (aim, next(self._seq), loop, fut))
+            if self._thread is None:
+                self._thread = threading.Thread(
+                    target=self._run, name="kvp-latency-timer", daemon=True
+                )
+                self._thread.start()
+            self._cond.notify()
+        await fut
+        self._late.append(time.monotonic() - aim)
+        self.lead = min(statistics.median(self._late), self.MAX_LEAD)
+
+    def _run(self) -> None:
+        with self._cond:
+            while True:
+                if not self._heap:
+                    if not self._cond.wait(self.IDLE) and not self._heap:
+                        self._thread = None
+                        return
+                    continue
+                delay = self._heap[0][0] - time.monotonic()
+                if delay > 0:
+                    self._cond.wait(delay)
+                    continue
+                _, _, loop, fut = heapq.heappop(self._heap)
+                try:
+                    loop.call_soon_threadsafe(_wake, fut)
+                except RuntimeError:  # the loop is closed: nobody waits any more
+                    pass
+
+
+def _wake(fut: asyncio.Future[None]) -> None:
+    if not fut.done():  # a cancelled waiter (dropped connection) is simply skipped
+        fut.set_result(None)
+
+
+#: The process' timer: one thread serves every emulator and connection.
+TIMER = DeadlineTimer()
+
+
+class ServiceQueue:
+    """The single proxy worker shared by every connection of one emulator.
+
+    ``run`` books the request with the :class:`Scheduler` when it is handed over, waits for its
+    deadline on the :class:`DeadlineTimer` and then computes the reply, so N busy clients each
+    see about N times the single-client latency, as on the real controller, and a client's own
+    pacing does not change the latency it sees.
+    """
+
+    def __init__(self, profile: LatencyProfile, rng: random.Random) -> None:
+        self.profile = profile
+        self.scheduler = Scheduler(profile, rng)
         self.served = 0
 
     async def run(self, kind: Kind, compute: Callable[[], T]) -> T:
-        async with self._lock:
-            loop = asyncio.get_running_loop()
-            now = loop.time()
-            # Deadlines are absolute and chained: when this request starts only because the
-            # previous sleep overshot by the timer granularity, it starts at the previous
-            # deadline instead of "now", so the ~1 ms overshoot does not accumulate and the
-            # throughput of a busy worker matches the profile's mean.
-            start = self._last_end if 0.0 <= now - self._last_end < _CATCH_UP else now
-            deadline = start + self.profile.sample(kind, self.rng)
-            self._last_end = deadline
-            delay = deadline - now
-            if delay > 0:
-                await asyncio.sleep(delay)
-            self.served += 1
-            return compute()
+        await TIMER.wait_until(self.scheduler.reserve(kind, time.monotonic()))
+        self.served += 1
+        return compute()
