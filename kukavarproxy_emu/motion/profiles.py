@@ -154,16 +154,17 @@ def pl_min(a: Curve, b: Curve) -> Curve:
     """
     sa, xa = a
     sb, xb = b
-    inside = sb[(sb > sa[0]) & (sb < sa[-1])]
-    s = np.union1d(sa, inside)
+    s = np.sort(np.concatenate([sa, sb[(sb > sa[0]) & (sb < sa[-1])]]))
     d = np.interp(s, sa, xa) - np.interp(s, sb, xb)
     k = np.flatnonzero(d[:-1] * d[1:] < 0.0)
     if len(k):
-        s = np.union1d(s, s[k] + (s[k + 1] - s[k]) * d[k] / (d[k] - d[k + 1]))
-    keep = np.concatenate([[True], np.diff(s) > NODE_EPS])
-    keep[-1] = True
+        s = np.sort(np.concatenate([s, s[k] + (s[k + 1] - s[k]) * d[k] / (d[k] - d[k + 1])]))
+    # (np.union1d would do, but its first call imports numpy.ma: 40 ms inside an IPO cycle)
+    # merge slivers: keep a node when the next one is farther away; keep both ends
+    keep = np.concatenate([np.diff(s) > NODE_EPS, [True]])
+    if len(s) > 1 and not keep[0]:
+        keep[0], keep[1] = True, False
     s = s[keep]
-    s[-1] = sa[-1]
     return s, np.minimum(np.interp(s, sa, xa), np.interp(s, sb, xb))
 
 

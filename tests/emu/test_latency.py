@@ -9,7 +9,14 @@ import time
 
 import pytest
 
-from kukavarproxy_emu.latency import PROFILES, LatencyProfile, ServiceQueue, resolve_profile
+from kukavarproxy_emu.latency import (
+    PROFILES,
+    DeadlineTimer,
+    LatencyProfile,
+    Scheduler,
+    ServiceQueue,
+    resolve_profile,
+)
 
 # the fixtures (the root conftest may also load them as a plugin)
 from kukavarproxy_emu.testing import *  # noqa: F403
@@ -105,3 +112,78 @@ async def test_ping_costs_no_service_time(emulator_factory: EmulatorFactory) -> 
     await c.request(encode_read(1, "PING"))
     assert time.perf_counter() - start < 0.04
     await c.close()
+
+
+# --- scheduling: the reply time does not depend on the client's pacing ----------------------
+def _rtts(arrival_gap: float | None, n: int = 40_000, seed: int = 5) -> dict[str, list[float]]:
+    """Reply times (ms) the scheduler gives one client: paced (``arrival_gap`` s after each
+    reply) or back to back (``None``: the next request 20 µs after the reply)."""
+    sched = Scheduler(PROFILES["kvp"], random.Random(seed))
+    out: dict[str, list[float]] = {"read": [], "write": []}
+    now = 0.0
+    for i in range(n):
+        kind = "read" if i % 2 else "write"
+        deadline = sched.reserve(kind, now)  # type: ignore[arg-type]
+        out[kind].append((deadline - now) * 1000)
+        now = deadline + (2e-5 if arrival_gap is None else arrival_gap)
+    return out
+
+
+def test_scheduler_gives_paced_and_back_to_back_clients_the_profile() -> None:
+    paced, b2b = _rtts(0.0015), _rtts(None)
+    for kind in ("read", "write"):  # the same samples, whatever the pacing
+        assert paced[kind] == pytest.approx(b2b[kind], abs=1e-9)
+    for kind, median in (("read", 2.3), ("write", 3.3)):
+        assert statistics.median(paced[kind]) == pytest.approx(median, abs=0.06)
+        assert min(b2b[kind]) >= 1.5  # never below the CrossComm floor
+    # and they are exactly the profile's samples, in order
+    rng = random.Random(5)
+    expected = [PROFILES["kvp"].sample("read" if i % 2 else "write", rng) for i in range(4)]
+    got = [b2b["write"][0], b2b["read"][0], b2b["write"][1], b2b["read"][1]]
+    assert got == pytest.approx([e * 1000 for e in expected])
+
+
+def test_scheduler_chains_requests_that_queue_up() -> None:
+    # five clients' requests all arrive at t = 0: the single worker serves them in turn
+    sched = Scheduler(LatencyProfile.fixed(0.002), random.Random(0))
+    deadlines = [sched.reserve("read", 0.0) for _ in range(5)]
+    assert deadlines == pytest.approx([0.002, 0.004, 0.006, 0.008, 0.010])
+    # a request arriving after the worker went idle starts at its own arrival
+    assert sched.reserve("read", 0.5) == pytest.approx(0.502)
+
+
+async def test_deadline_timer_wakes_on_time_never_early() -> None:
+    timer = DeadlineTimer()
+    late = []
+    for i in range(40):
+        deadline = time.monotonic() + 0.0015 + 0.00005 * i
+        await timer.wait_until(deadline)
+        late.append(time.monotonic() - deadline)
+    assert min(late) >= -DeadlineTimer.MAX_LEAD - 1e-4
+    # asyncio.sleep is ~0.5-1 ms late here (millisecond timeouts, rounded up)
+    assert statistics.median(late) < 0.001
+
+
+async def _paced_rtts(host: str, port: int, gap: float, n: int) -> list[float]:
+    c = await RawClient.connect(host, port)
+    out = []
+    for i in range(n):
+        if gap:
+            await asyncio.sleep(gap)
+        start = time.perf_counter()
+        await c.request(encode_read(i, "$OV_PRO"))
+        out.append(time.perf_counter() - start)
+    await c.close()
+    return out
+
+
+async def test_reply_times_do_not_depend_on_the_clients_pacing(
+    emulator_factory: EmulatorFactory,
+) -> None:
+    emu = await emulator_factory(latency=LatencyProfile.fixed(0.0025))
+    for gap in (0.0, 0.0015):
+        rtt = await _paced_rtts(emu.host, emu.port, gap, 40)
+        # never answered before the service time (main: back to back got 0.2 ms), and the
+        # median not a timer tick late (a loaded machine may add some)
+        assert min(rtt) >= 0.0025 - DeadlineTimer.MAX_LEAD - 1e-4, (gap, min(rtt))
+        assert statistics.median(rtt) < 0.0025 + 0.002, (gap, statistics.median(rtt))
