@@ -32,6 +32,8 @@ SCRIPTS = [
     ("Kinematics", "kinematics.py"),
     ("Simulated robot CPU", "plant_cpu.py"),
     ("CLI", "cli_startup.py"),
+    ("Latency profile", "latency_pacing.py"),
+    ("Motion kernel", "motion_kss.py"),
 ]
 
 

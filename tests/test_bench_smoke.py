@@ -26,6 +26,8 @@ BENCH = Path(__file__).resolve().parents[1] / "bench"
         ("kinematics.py", "Jacobian"),
         ("plant_cpu.py", "dynamic plant, moving"),
         ("cli_startup.py", "kvp read start-up"),
+        ("latency_pacing.py", "paced"),
+        ("motion_kss.py", "A2 reversal"),
     ],
 )
 def test_benchmark_runs_quick(script: str, expect: str) -> None:

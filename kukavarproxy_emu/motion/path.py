@@ -46,10 +46,10 @@ MAX_STEP = 2.0
 MIN_STEP = 1e-3
 #: A path needing more nodes than this runs too close to a singularity to be planned.
 MAX_NODES = 6000
-#: Poses per IK batch (about 1 ms each).
-IK_BATCH = 64
+#: Poses per IK batch (well under 1 ms each).
+IK_BATCH = 32
 #: Nodes per slice of the phase-plane passes.
-PASS_CHUNK = 200
+PASS_CHUNK = 100
 #: Fractions of the axis limits the planner uses: the IK path bends slightly between nodes.
 SPEED_MARGIN = 0.99
 ACCEL_MARGIN = 0.95
