@@ -356,7 +356,9 @@ class MotionKernel(Publisher):
             outside = np.flatnonzero(np.any((q < lo[:6] - 1e-9) | (q > hi[:6] + 1e-9), axis=1))
             if len(outside):
                 self.check_limits(q[outside[0]], f"{label} at {s[outside[0]]:.0%}")
-            limits = PathLimits(s, q, geo, v, a, self.model.max_speed, self.model.max_accel)
+            limits = PathLimits(
+                self.model, s, q, geo, v, a, self.model.max_speed, self.model.max_accel
+            )
             curve, bw = yield from limits.plan()
             profile = Profile(*curve)
         except PathRefused as exc:

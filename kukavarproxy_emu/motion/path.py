@@ -188,6 +188,7 @@ class PathLimits:
 
     def __init__(
         self,
+        model: RobotModel,
         s: FloatArray,
         q: FloatArray,
         geo: LinGeometry,
@@ -196,7 +197,7 @@ class PathLimits:
         v_axis: FloatArray,
         a_axis: FloatArray,
     ) -> None:
-        self.s, self.q = s, q
+        self.model, self.s, self.q = model, s, q
         span = np.diff(s)
         self.chord = np.diff(q, axis=0) / span[:, None]  # deg per unit s, per interval
         qp = np.empty_like(q)
@@ -293,7 +294,7 @@ class PathLimits:
                 f = (lim_next - x_next) / ((lim_next - x_next) + (cand - cap[k]))
                 ss.append(s_next - f * d)
                 xs.append(x_next + f * (cand - x_next))
-            x = min(cap[k], cand)
+            x = max(min(cap[k], cand), 0.0)  # 0: cannot pass here without stopping
             ss.append(s_list[k])
             xs.append(x)
             if above is not None and x >= float(np.interp(s_list[k], *above)):
@@ -330,7 +331,11 @@ class PathLimits:
                 xs.append(x_prev + f * (cand - x_prev))
             x = min(limit[k], cand)
             if x <= 0.0 and k < len(s_list) - 1:
-                raise PathRefused(f"path speed falls to zero near {s_list[k]:.0%}")
+                where = _singularity(self.model, self.q[k])
+                raise PathRefused(
+                    f"path runs too close to the {where} singularity near {s_list[k]:.0%}: "
+                    "its speed would fall to zero"
+                )
             ss.append(s_list[k])
             xs.append(max(x, 0.0))
             s_prev, x_prev, k_prev, lim_prev = s_list[k], x, k, limit[k]
