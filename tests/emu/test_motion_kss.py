@@ -12,8 +12,11 @@ import time
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
-from kukavarproxy_emu.motion import MotionRefused, Robot
+from kukavarproxy_emu.motion import MotionRefused, Robot, Trapezoid
+from kukavarproxy_emu.motion.profiles import Profile, pl_min
 from kukavarproxy_emu.store import VariableStore
 from pyopenshowvar.kinematics import KR6R900SIXX, forward, inverse, matrix_to_frame, pose_to_matrix
 from pyopenshowvar.krl import E6Axis
@@ -218,3 +221,41 @@ def test_override_ramp_is_fast_where_the_limits_allow() -> None:
         ticks += 1
     assert ticks * IPO == pytest.approx(0.9 * VMAX[0] / AMAX[0], abs=2 * IPO)
     assert math.isclose(abs(robot.kernel.qd[0]), 0.1 * VMAX[0], rel_tol=1e-9)
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    first=st.lists(st.floats(-40.0, 40.0), min_size=6, max_size=6),
+    second=st.lists(st.floats(-40.0, 40.0), min_size=6, max_size=6),
+    cptp=st.integers(1, 100),
+    acc=st.integers(40, 100),
+)
+def test_any_c_ptp_blend_stays_within_limits_and_ends_exactly(
+    first: list[float], second: list[float], cptp: int, acc: int
+) -> None:
+    robot = make_robot(HOME)
+    robot.store.write("$APO", f"{{CPTP {cptp}}}")
+    for i in range(1, 7):
+        robot.store.write(f"$ACC_AXIS[{i}]", str(acc))
+    mid, end = at(*first), at(*first) + np.array(second)
+    robot.kernel.ptp(mid, approx=True)
+    robot.kernel.ptp(end)
+    run(robot)
+    q = np.array([q for _t, q, _qd in robot.kernel.trace])
+    qd = np.diff(q, axis=0) / IPO
+    qdd = np.diff(qd, axis=0) / IPO
+    assert np.all(np.abs(qd) <= VMAX * (1 + TOL))
+    assert np.all(np.abs(qdd) <= AMAX * acc / 100 * (1 + TOL) + TOL)
+    np.testing.assert_allclose(robot.q, end, atol=1e-9)
+
+
+def test_profile_time_and_path_parameter_are_inverse() -> None:
+    prof = Profile.trapezoid(1.5, 4.0)  # the same curve as Trapezoid.plan
+    assert prof.duration == pytest.approx(Trapezoid.plan(1.5, 4.0).duration)
+    for t in np.linspace(0.0, prof.duration, 37):
+        assert prof.time_at(prof.s_at(t)) == pytest.approx(t, abs=1e-9)
+    s, x = pl_min(
+        (np.array([0.0, 1.0]), np.array([0.0, 2.0])), (np.array([0.0, 1.0]), np.array([1.0, 1.0]))
+    )
+    np.testing.assert_allclose(s, [0.0, 0.5, 1.0])  # the crossing became a node
+    np.testing.assert_allclose(x, [0.0, 1.0, 1.0])
