@@ -175,13 +175,22 @@ def ramp_curve(s0: float, x0: float, s1: float, x1: float, x_max: float, a_max: 
     Raises ``ValueError`` when the end state cannot be reached (too fast to stop in time).
     """
     span = s1 - s0
-    if x0 > x1 + 2.0 * a_max * span + 1e-12 or x1 > x0 + 2.0 * a_max * span + 1e-12:
+    reach = 2.0 * a_max * span
+    if x0 > x1 + reach + 1e-12 or x1 > x0 + reach + 1e-12:
         raise ValueError("the end speed cannot be reached within the distance")
-    ends = np.array([s0, s1])
-    forward = (ends, np.array([x0, x0 + 2.0 * a_max * span]))
-    backward = (ends, np.array([x1 + 2.0 * a_max * span, x1]))
-    cap = (ends, np.array([x_max, x_max]))
-    return pl_min(pl_min(forward, backward), cap)
+    # closed form (this runs for every PTP): the accelerating and braking lines meet at s_m
+    s_m = min(max(0.5 * (s0 + s1) + (x1 - x0) / (4.0 * a_max), s0), s1)
+    x_m = x0 + 2.0 * a_max * (s_m - s0)
+    if x_m <= x_max:
+        nodes, values = [s0, s_m, s1], [x0, x_m, x1]
+    else:  # cruise at the cap in between
+        s_a = s0 + max(x_max - x0, 0.0) / (2.0 * a_max)
+        s_d = s1 - max(x_max - x1, 0.0) / (2.0 * a_max)
+        nodes, values = [s0, s_a, s_d, s1], [x0, x_max, x_max, x1]
+    keep = [0] + [i for i in range(1, len(nodes)) if nodes[i] - nodes[i - 1] > NODE_EPS]
+    if keep[-1] != len(nodes) - 1:
+        keep[-1] = len(nodes) - 1
+    return np.array([nodes[i] for i in keep]), np.array([values[i] for i in keep])
 
 
 class Profile:
@@ -195,18 +204,25 @@ class Profile:
     __slots__ = ("_s", "_t", "_x", "duration", "s", "t", "x")
 
     def __init__(self, s: FloatArray, x: FloatArray) -> None:
-        self.s = np.asarray(s, dtype=np.float64)
-        self.x = np.maximum(np.asarray(x, dtype=np.float64), 0.0)
-        v = np.sqrt(self.x)
-        span = np.diff(self.s)
-        speed = v[:-1] + v[1:]
-        if np.any((speed <= 0.0) & (span > 0.0)):
-            raise ValueError("the profile stops inside the motion")
-        dt = np.divide(2.0 * span, speed, out=np.zeros_like(span), where=span > 0.0)
-        self.t = np.concatenate([[0.0], np.cumsum(dt)])
-        self.duration = float(self.t[-1])
-        # plain lists: bisect on them is several times faster than numpy for one lookup
-        self._t, self._s, self._x = self.t.tolist(), self.s.tolist(), self.x.tolist()
+        # plain floats: profiles are built for every PTP and looked up every cycle, and
+        # numpy's per-call overhead dominates on a handful of nodes
+        s_list = [float(v) for v in s]
+        x_list = [max(float(v), 0.0) for v in x]
+        t_list = [0.0]
+        v_prev = math.sqrt(x_list[0])
+        for k in range(1, len(s_list)):
+            v = math.sqrt(x_list[k])
+            span = s_list[k] - s_list[k - 1]
+            if span > 0.0:
+                if v_prev + v <= 0.0:
+                    raise ValueError("the profile stops inside the motion")
+                t_list.append(t_list[-1] + 2.0 * span / (v_prev + v))
+            else:
+                t_list.append(t_list[-1])
+            v_prev = v
+        self._s, self._x, self._t = s_list, x_list, t_list
+        self.s, self.x, self.t = np.array(s_list), np.array(x_list), np.array(t_list)
+        self.duration = t_list[-1]
 
     @classmethod
     def instant(cls) -> Profile:

@@ -61,17 +61,20 @@ class ConstLimits:
         return ends, np.array([x_end + 2.0 * self.a * s_end, x_end])
 
     def forward(self, s_start: float, x_start: float, below: Curve) -> Generator[None, None, Curve]:
+        # ``below`` is this segment's own braking curve, which the ramp already respects
         yield from ()
-        return pl_min(ramp_curve(s_start, x_start, 1.0, 0.0, self.v * self.v, self.a), below)
+        return ramp_curve(s_start, x_start, 1.0, 0.0, self.v * self.v, self.a)
 
     def plan(self) -> Generator[None, None, tuple[Curve, Curve]]:
         yield from ()
         if math.isinf(self.v):
             return (np.array([1.0]), np.array([0.0])), (np.array([0.0, 1.0]), np.zeros(2))
-        curve = ramp_curve(0.0, 0.0, 1.0, 0.0, self.v * self.v, self.a)
-        ends = np.array([0.0, 1.0])
-        bw = pl_min((ends, np.array([2.0 * self.a, 0.0])), (ends, np.full(2, self.v * self.v)))
-        return curve, bw
+        cap = self.v * self.v
+        curve = ramp_curve(0.0, 0.0, 1.0, 0.0, cap, self.a)
+        s_d = 1.0 - cap / (2.0 * self.a)  # braking from the cap must start here
+        if s_d > 0.0:
+            return curve, (np.array([0.0, s_d, 1.0]), np.array([cap, cap, 0.0]))
+        return curve, (np.array([0.0, 1.0]), np.array([2.0 * self.a, 0.0]))
 
 
 Limits = ConstLimits | PathLimits
