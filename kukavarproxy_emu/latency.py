@@ -178,7 +178,8 @@ class DeadlineTimer:
     the loop still takes a little while (~0.1 ms on a quiet machine, more under load), so the
     timer measures that delay and aims early by its running median (overshoot compensation,
     at most ``MAX_LEAD``): the typical wake-up lands on the deadline instead of after it. The
-    thread starts with the first deadline and stops after ``IDLE`` seconds without one.
+    loop's own timer at the deadline is a backstop (a busy machine may schedule the thread
+    late). The thread starts with the first deadline and stops after ``IDLE`` seconds idle.
     """
 
     IDLE = 5.0
@@ -211,7 +212,13 @@ class DeadlineTimer:
                 )
                 self._thread.start()
             self._cond.notify()
-        await fut
+        # The loop's own timer as a backstop: on a busy machine, waking a second thread first
+        # can take longer than the selector's millisecond; whichever comes first wins.
+        backstop = loop.call_later(deadline - time.monotonic(), _wake, fut)
+        try:
+            await fut
+        finally:
+            backstop.cancel()
         self._late.append(time.monotonic() - aim)
         self.lead = min(statistics.median(self._late), self.MAX_LEAD)
 
