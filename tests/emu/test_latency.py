@@ -183,7 +183,8 @@ async def test_reply_times_do_not_depend_on_the_clients_pacing(
     emu = await emulator_factory(latency=LatencyProfile.fixed(0.0025))
     for gap in (0.0, 0.0015):
         rtt = await _paced_rtts(emu.host, emu.port, gap, 40)
-        # never answered before the service time (main: back to back got 0.2 ms), and the
-        # median not a timer tick late (a loaded machine may add some)
+        # never answered before the service time (main: back to back got 0.2 ms); the median's
+        # accuracy is the scheduler's and the timer's (tested above): here only "not stalled",
+        # since a loaded CI machine adds milliseconds of its own
         assert min(rtt) >= 0.0025 - DeadlineTimer.MAX_LEAD - 1e-4, (gap, min(rtt))
-        assert statistics.median(rtt) < 0.0025 + 0.002, (gap, statistics.median(rtt))
+        assert statistics.median(rtt) < 0.0025 + 0.005, (gap, statistics.median(rtt))
