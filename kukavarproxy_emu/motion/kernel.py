@@ -45,7 +45,7 @@ from pyopenshowvar.kinematics import (
 from pyopenshowvar.krl import Struct
 
 from ..store import VariableStore
-from .path import LinGeometry, PathLimits, PathRefused, joint_path
+from .path import LinGeometry, PathLimits, PathRefused, joint_path, leave_wrist_singularity
 from .profiles import FloatArray, Profile
 from .publish import Publisher
 from .segments import ConstLimits, Kind, Segment, blend, rotation_log, rotvec_matrix
@@ -60,6 +60,8 @@ log = logging.getLogger(__name__)
 DEFAULT_INERTIA = (2.0, 2.5, 0.7, 0.04, 0.04, 0.01)
 #: Bisection steps for the override rate of one cycle (resolution 2⁻¹² of the change).
 OV_BISECT = 12
+#: |A5| below this (deg) is on the wrist singularity, where a LIN first turns A4/A6 in place.
+WRIST_SINGULAR = 1e-6
 #: KRC machine datum $APO_DIS_PTP (deg): 100 % C_PTP would start blending this far out.
 APO_DIS_PTP = 90.0
 TraceSample = tuple[float, FloatArray, FloatArray]
@@ -351,7 +353,11 @@ class MotionKernel(Publisher):
         if not self.active and not self.pending and geo.length < 1e-9 and geo.angle < 1e-9:
             return
         try:
-            s, q = yield from joint_path(self.model, geo, q0, *frames)
+            config = None
+            start = q0
+            if abs(q0[4]) < WRIST_SINGULAR:
+                start, config = leave_wrist_singularity(self.model, geo, q0, *frames)
+            s, q = yield from joint_path(self.model, geo, start, *frames, config=config)
             lo, hi = self._soft_limits()
             outside = np.flatnonzero(np.any((q < lo[:6] - 1e-9) | (q > hi[:6] + 1e-9), axis=1))
             if len(outside):
@@ -367,6 +373,9 @@ class MotionKernel(Publisher):
             raise MotionRefused(f"{label}: {exc}") from None
         if not np.array_equal(q0, self.planned_q):
             raise MotionRefused(f"{label}: the motions before it changed while it was planned")
+        if np.max(np.abs(start - q0)) > 1e-9:
+            # starting on the wrist singularity: A4/A6 first turn in place (the TCP stays put)
+            self.ptp(start, label=f"{label} (wrist)")
         rows = [(geo.dp, a[0]), (np.degrees(geo.rv), a[1])]
         seg = Segment(
             Kind.LIN, profile, limits, bw, geo.dp, q[-1].copy(), approx, frac, geo.rv, label, rows

@@ -36,7 +36,7 @@ from pyopenshowvar.kinematics import RobotModel, UnreachableError, inverse, stat
 
 from .profiles import Curve, FloatArray, pl_min
 
-__all__ = ["LinGeometry", "PathLimits", "PathRefused", "joint_path"]
+__all__ = ["LinGeometry", "PathLimits", "PathRefused", "joint_path", "leave_wrist_singularity"]
 
 #: Coarse sampling of the line (mm, or degrees of orientation).
 LIN_STEP = 5.0
@@ -94,6 +94,22 @@ class LinGeometry:
         return out
 
 
+def leave_wrist_singularity(
+    model: RobotModel, geo: LinGeometry, q0: FloatArray, tool: FloatArray, base: FloatArray
+) -> tuple[FloatArray, int]:
+    """Where a line that starts *on* the wrist singularity (A5 = 0, e.g. HOME) really starts.
+
+    There only A4 ± A6 is defined, and the line leaves in one particular split of the two. The
+    returned start has that split (the same TCP pose: the wrist turns in place), with the S bits
+    of the branch the line continues in.
+    """
+    step = min(1.0, MIN_STEP / max(geo.scale, 1e-12))
+    near = inverse(model, geo.poses(np.array([step]))[0], current=q0, tool=tool, base=base)
+    start = inverse(model, geo.start, current=near, tool=tool, base=base)
+    start = start - 360.0 * np.round((start - q0) / 360.0)  # the turn nearest the robot's
+    return start, int(status_turn(model, near)[0])
+
+
 def _chain(q0: FloatArray, q: FloatArray) -> FloatArray:
     """Unwrap a joint path: each step taken as its equivalent in (-180, 180]."""
     step = np.diff(np.vstack([q0, q[1:]]), axis=0)
@@ -116,12 +132,15 @@ def joint_path(
     q0: FloatArray,
     tool: FloatArray,
     base: FloatArray,
+    config: int | None = None,
 ) -> Generator[None, None, tuple[FloatArray, FloatArray]]:
     """Nodes ``(s, q)`` of the joint path along the line, yielding after each IK batch.
 
-    Raises :class:`PathRefused` when a pose is out of reach or the line crosses a singularity.
+    ``config`` (S bits) defaults to the start's. Raises :class:`PathRefused` when a pose is out
+    of reach or the line crosses a singularity.
     """
-    config = int(status_turn(model, q0)[0])
+    if config is None:
+        config = int(status_turn(model, q0)[0])
 
     def solve(s: FloatArray, near: FloatArray) -> FloatArray:
         return inverse(
