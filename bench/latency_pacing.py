@@ -1,6 +1,6 @@
 """Latency-profile fidelity: reply times of the ``kvp`` profile for paced and back-to-back clients.
 
-The emulator runs with ``--latency kvp`` in a subprocess (its own core); one blocking client
+The emulator runs with ``--latency kvp --no-robot`` in a subprocess (its own core); one client
 sends reads of ``$AXIS_ACT`` and writes of ``MYINT``, either back to back (the next request as
 soon as the reply is in) or paced (``--gap`` ms of sleep between a reply and the next request, as
 a client with its own control loop does). The profile's medians are 2.3 ms (read) and 3.3 ms
@@ -69,7 +69,8 @@ def main() -> None:
     args = ap.parse_args()
     n = 30 if args.quick else args.n
     rows: list[Row] = []
-    with EmuProcess("--latency", "kvp", "--seed", "1") as emu:
+    # no simulated robot: the figures are the latency model's, not the plant's CPU load
+    with EmuProcess("--latency", "kvp", "--seed", "1", "--no-robot") as emu:
         measure(emu.host, emu.port, 10, 0.0)  # warm up
         for label, gap in (("back-to-back", 0.0), (f"paced {args.gap:g} ms", args.gap / 1e3)):
             rtt = measure(emu.host, emu.port, n, gap)

@@ -168,6 +168,13 @@ class Scheduler:
         self.free_at = start + self.profile.sample(kind, self.rng)
         return self.free_at
 
+    def answered(self, deadline: float, now: float) -> None:
+        """The reply booked for ``deadline`` went out at ``now`` (a little early, when the timer
+        compensates its overshoot): if nothing is booked after it, the worker is free now, so
+        the client's next request does not wait for the rest of that deadline."""
+        if self.free_at == deadline:
+            self.free_at = min(deadline, now)
+
 
 class DeadlineTimer:
     """Completes asyncio futures at absolute ``time.monotonic()`` deadlines.
@@ -265,6 +272,8 @@ class ServiceQueue:
         self.served = 0
 
     async def run(self, kind: Kind, compute: Callable[[], T]) -> T:
-        await TIMER.wait_until(self.scheduler.reserve(kind, time.monotonic()))
+        deadline = self.scheduler.reserve(kind, time.monotonic())
+        await TIMER.wait_until(deadline)
+        self.scheduler.answered(deadline, time.monotonic())
         self.served += 1
         return compute()

@@ -190,3 +190,15 @@ async def test_reply_times_do_not_depend_on_the_clients_pacing(
         # since a loaded CI machine adds milliseconds of its own
         assert min(rtt) >= 0.0025 - DeadlineTimer.MAX_LEAD - 1e-4, (gap, min(rtt))
         assert statistics.median(rtt) < 0.0025 + 0.005, (gap, statistics.median(rtt))
+
+
+def test_an_early_reply_frees_the_worker_at_once() -> None:
+    sched = Scheduler(LatencyProfile.fixed(0.002), random.Random(0))
+    first = sched.reserve("read", 0.0)
+    sched.answered(first, first - 0.0003)  # the timer woke 0.3 ms early (its compensation)
+    # the client's next request, sent on that reply, is not charged the remaining 0.3 ms
+    assert sched.reserve("read", first - 0.0002) == pytest.approx(first - 0.0002 + 0.002)
+    # but a booking behind it keeps the chain
+    a, b = sched.reserve("read", 1.0), sched.reserve("read", 1.0)
+    sched.answered(a, a - 0.0003)
+    assert sched.free_at == b
