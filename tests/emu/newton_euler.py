@@ -60,8 +60,10 @@ def inverse_dynamics(
     prev_org = np.zeros(3)
     f_link, n_link = [], []
     for j in range(6):
-        acc_origin = acc_origin + np.cross(dw, org[j] - prev_org) + np.cross(
-            w, np.cross(w, org[j] - prev_org)
+        acc_origin = (
+            acc_origin
+            + np.cross(dw, org[j] - prev_org)
+            + np.cross(w, np.cross(w, org[j] - prev_org))
         )
         dw = dw + z[j] * qdd[j] + np.cross(w, z[j] * qd[j])
         w = w + z[j] * qd[j]

@@ -98,13 +98,15 @@ async def _client_run(host: str, port: int, n: int) -> float:
 async def test_global_serialisation(emulator_factory: EmulatorFactory) -> None:
     emu = await emulator_factory(latency=LatencyProfile.fixed(0.01))
     alone = await _client_run(emu.host, emu.port, 10)
+    begun = time.perf_counter()
     together = await asyncio.gather(*(_client_run(emu.host, emu.port, 10) for _ in range(3)))
+    span = time.perf_counter() - begun
     assert 0.09 <= alone < 0.2
-    # three clients share one worker: 30 requests of 10 ms go through it one after the other,
-    # so none of them can be done before ~0.28 s (client i's k-th reply at (3k + i + 1)·10 ms),
-    # whatever the machine's load does to the single client's time
-    for elapsed in together:
-        assert 0.27 <= elapsed <= 4.5 * alone
+    # three clients share one worker: their 30 requests of 10 ms go through it one after the
+    # other, however a loaded machine staggers the clients' starts (no ratio to the single
+    # client's time: that one carries the machine's noise)
+    assert span >= 30 * 0.01 - DeadlineTimer.MAX_LEAD
+    assert max(together) <= 4.5 * alone
 
 
 async def test_ping_costs_no_service_time(emulator_factory: EmulatorFactory) -> None:

@@ -45,9 +45,7 @@ def plant_of(robot: Robot) -> DynamicPlant:
 
 def friction(plant: DynamicPlant, qd: np.ndarray) -> np.ndarray:
     b = plant.bodies
-    return np.asarray(
-        b.coulomb * np.tanh(qd / plant.params.friction_smoothing) + b.viscous * qd
-    )
+    return np.asarray(b.coulomb * np.tanh(qd / plant.params.friction_smoothing) + b.viscous * qd)
 
 
 def run_until_rest(robot: Robot, limit: int = 400) -> int:

@@ -101,7 +101,9 @@ def test_unknown_variable_is_empty_bytes_not_none(client: openshowvar) -> None:
 # --- writes --------------------------------------------------------------------------------
 
 
-def test_write_ov_pro_and_read_back(client: openshowvar, ideal_emulator_thread: EmulatorThread) -> None:
+def test_write_ov_pro_and_read_back(
+    client: openshowvar, ideal_emulator_thread: EmulatorThread
+) -> None:
     assert client.write("$OV_PRO", "50", debug=False) == b"50"  # KVP echoes the written text
     assert client.read("$OV_PRO", debug=False) == b"50"
     assert ideal_emulator_thread.store.get("$OV_PRO") == 50
