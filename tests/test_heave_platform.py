@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from pyopenshowvar_apps.heave.accel import MAX_LINE, AccelFirmware, AccelReader, parse_line
 from pyopenshowvar_apps.heave.geometry import THESIS_PLATFORM as G
@@ -37,7 +37,12 @@ def test_leg_round_trip(beta: float) -> None:
 @given(st.floats(-60, 60), st.floats(-5, 5), st.floats(-5, 5))
 def test_platform_inverse_forward_round_trip(z: float, phi: float, theta: float) -> None:
     pose = PlatformPose(z, phi, theta)
-    back = G.forward(G.inverse(pose))
+    try:
+        legs = G.inverse(pose)
+    except UnreachablePose:
+        # Near the ends of the heave range a tilt puts a corner outside the stroke.
+        assume(False)
+    back = G.forward(legs)
     assert back.as_array() == pytest.approx(pose.as_array(), abs=1e-7)
 
 
