@@ -22,7 +22,8 @@ from __future__ import annotations
 
 import asyncio
 import math
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Sequence
+from pathlib import Path
 from typing import Any, NoReturn, TypeVar
 
 import typer
@@ -115,20 +116,39 @@ def check_window(value: float) -> float:
     return value
 
 
-def start_embedded_emulator(ctx: typer.Context | None = None) -> Any:
+def start_embedded_emulator(
+    ctx: typer.Context | None = None,
+    *,
+    program: str | None = None,
+    config_files: Sequence[Path] = (),
+) -> Any:
     """An in-process emulator on an ephemeral port; :func:`stop_embedded_emulator` ends it.
 
     Idempotent: ``kvp --emulate monitor --emulate`` starts one emulator only. It answers UDP
     discovery on an ephemeral port too (to the asker's own port), so ``kvp --emulate
     discover`` finds it. ``ctx`` (optional) stops it when that command ends; under ``kvp`` the
-    top-level command always does.
+    top-level command always does. A command that needs its own robot program (``kvp
+    --emulate web`` runs KVP_JOG) passes ``program`` and the ``$CONFIG.DAT`` files it needs;
+    an emulator already running another program is replaced.
     """
     if Opts.emulator is not None:
-        return Opts.emulator
+        if program is None or Opts.emulator.config.program == program:
+            return Opts.emulator
+        Opts.emulator.stop()
+        Opts.emulator = None
     from kukavarproxy_emu import EmulatorConfig, EmulatorThread
 
+    extra: dict[str, Any] = {}
+    if program is not None:
+        extra = {"program": program, "config_files": tuple(config_files)}
     config = EmulatorConfig(
-        host="127.0.0.1", port=0, discovery=True, udp_port=0, udp_reply_port=0, plant=Opts.plant
+        host="127.0.0.1",
+        port=0,
+        discovery=True,
+        udp_port=0,
+        udp_reply_port=0,
+        plant=Opts.plant,
+        **extra,
     )
     Opts.emulator = EmulatorThread(config).start()
     Opts.host, Opts.port = "127.0.0.1", Opts.emulator.port

@@ -70,13 +70,12 @@ class MotionMixin:
             target, label = self._inline(stmt)
             approx = stmt.cont
         else:
-            if stmt.frame == "TOOL":
-                raise KrlRuntimeError(f"{stmt.kind} #TOOL is not supported by the emulator", stmt)
             target = self.ev.eval(stmt.target)
             label = f"{stmt.kind} {render(stmt.target, self._index_text)}"
             approx = stmt.approx is not None
         try:
-            job = self._plan(kernel, stmt.kind, target, approx, label, stmt)
+            tool = isinstance(stmt, ast.Motion) and stmt.frame == "TOOL"
+            job = self._plan(kernel, stmt.kind, target, approx, label, stmt, tool=tool)
             # A LIN is planned in slices within this cycle's time budget; the advance run
             # stays on the statement until it is planned (or refused), as on a KRC.
             while job is not None and not job.step(self._until):
@@ -102,12 +101,16 @@ class MotionMixin:
         approx: bool,
         label: str,
         node: ast.Node,
+        *,
+        tool: bool = False,
     ) -> PlanJob | None:
         """Plan the motion; a LIN comes back as a job still to be stepped."""
         if not isinstance(target, Struct):
             raise KrlRuntimeError(f"{kind} needs an AXIS/E6AXIS or POS/E6POS/FRAME target", node)
         relative = kind.endswith("_REL")
         if any(a in target for a in _AXES):
+            if tool:
+                raise KrlRuntimeError(f"{kind} #TOOL needs a POS/FRAME increment", node)
             if kind.startswith("LIN"):
                 raise KrlRuntimeError(f"{kind} to an axis target is not supported", node)
             base = np.zeros(6) if relative else kernel.planned_q
@@ -122,9 +125,9 @@ class MotionMixin:
         if relative:
             inc = self._vector(target, _POSE, np.zeros(6), node)
             if kind == "PTP_REL":
-                kernel.ptp_rel_pose(inc, approx=approx, label=label)
+                kernel.ptp_rel_pose(inc, approx=approx, tool=tool, label=label)
                 return None
-            return kernel.plan_lin_rel(inc, approx=approx, label=label)
+            return kernel.plan_lin_rel(inc, approx=approx, tool=tool, label=label)
         pose = self._vector(target, _POSE, kernel.planned_pose(), node)
         if kind == "PTP":
             s, t = target.get("S"), target.get("T")

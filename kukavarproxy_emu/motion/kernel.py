@@ -289,11 +289,14 @@ class MotionKernel(Publisher):
         tool, base = self._read_frames()
         return np.asarray(forward(self.model, self.planned_q, tool, base), dtype=np.float64)
 
-    def rel_pose(self, increment: object) -> FloatArray:
+    def rel_pose(self, increment: object, *, tool: bool = False) -> FloatArray:
         """Planned end pose moved by a Cartesian increment: X/Y/Z added in $BASE, and the
-        rotation Rz(A)·Ry(B)·Rx(C) applied about the $BASE axes at the TCP."""
+        rotation Rz(A)·Ry(B)·Rx(C) applied about the $BASE axes at the TCP; with ``tool``
+        (``#TOOL``) the increment is a frame in the TCP's own axes instead."""
         inc = _xyzabc(increment, "increment")
         start = pose_to_matrix(self.planned_pose())
+        if tool:
+            return np.asarray(matrix_to_frame(start @ pose_to_matrix(inc)), dtype=np.float64)
         rot = pose_to_matrix(np.array([0.0, 0.0, 0.0, *inc[3:]]))
         end = start.copy()
         end[:3, :3] = rot[:3, :3] @ start[:3, :3]
@@ -301,21 +304,23 @@ class MotionKernel(Publisher):
         return np.asarray(matrix_to_frame(end), dtype=np.float64)
 
     def ptp_rel_pose(
-        self, increment: object, *, approx: bool = False, label: str = "PTP_REL"
+        self, increment: object, *, approx: bool = False, tool: bool = False, label: str = "PTP_REL"
     ) -> None:
         """``PTP_REL`` by a POS/FRAME increment (Algorithm 4.12's ``PTP_REL MYPOS``)."""
         inc = _xyzabc(increment, label)
         if not self.active and not self.pending and not np.any(inc):
             return
-        self.ptp_pose(self.rel_pose(inc), approx=approx, label=label)
+        self.ptp_pose(self.rel_pose(inc, tool=tool), approx=approx, label=label)
 
     def lin(self, pose: object, *, approx: bool = False, label: str = "LIN") -> None:
         """Plan ``LIN pose [C_DIS]``: a straight TCP line in $BASE at ``$VEL.CP``."""
         self.plan_lin(pose, approx=approx, label=label).run()
 
-    def lin_rel(self, increment: object, *, approx: bool = False, label: str = "LIN_REL") -> None:
+    def lin_rel(
+        self, increment: object, *, approx: bool = False, tool: bool = False, label: str = "LIN_REL"
+    ) -> None:
         """``LIN_REL`` by a Cartesian increment from the previous planned end point."""
-        self.lin(self.rel_pose(increment), approx=approx, label=label)
+        self.lin(self.rel_pose(increment, tool=tool), approx=approx, label=label)
 
     def plan_lin(self, pose: object, *, approx: bool = False, label: str = "LIN") -> PlanJob:
         """``LIN pose`` as a :class:`PlanJob`: the target and $TOOL/$BASE/$VEL/$ACC/$APO are
@@ -335,9 +340,9 @@ class MotionKernel(Publisher):
         return PlanJob(self._plan_lin(geo, frames, v, a, approx, frac, label))
 
     def plan_lin_rel(
-        self, increment: object, *, approx: bool = False, label: str = "LIN_REL"
+        self, increment: object, *, approx: bool = False, tool: bool = False, label: str = "LIN_REL"
     ) -> PlanJob:
-        return self.plan_lin(self.rel_pose(increment), approx=approx, label=label)
+        return self.plan_lin(self.rel_pose(increment, tool=tool), approx=approx, label=label)
 
     def _plan_lin(
         self,

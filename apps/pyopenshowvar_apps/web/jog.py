@@ -1,0 +1,276 @@
+"""Hold-to-move jogging: one owner at a time, a keep-alive from the page, credit for the robot.
+
+The page sends ``jog`` when a button goes down and repeats it as a keep-alive while the
+button is held (every 25 ms); it sends ``release`` when the button comes up, the pointer
+leaves, the window loses focus or the tab is hidden. :class:`JogController` turns that into
+writes on its own KVP connection:
+
+* press: the increment and accelerations, then ``JOG_LEFT`` (credit) and ``JOG_MODE``;
+* while held: ``JOG_LEFT`` topped up to :data:`~.jogplan.CREDIT` every :data:`TOPUP` s, but
+  never past what the software limits (axes) or the reachable workspace (Cartesian) allow;
+* release, a dropped WebSocket, :data:`HOLD_TIMEOUT` without a keep-alive, or a failed write:
+  the increment zeroed first, then ``JOG_LEFT = 0`` and ``JOG_MODE = 0``, pipelined.
+
+If the PC itself goes silent the robot still stops: the credit runs out after CREDIT
+increments (the KRL program's own watchdog, see ``krl/kvp_jog.src``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from pyopenshowvar import Client, KvpError
+from pyopenshowvar.kinematics import (
+    RobotModel,
+    UnreachableError,
+    inverse,
+    matrix_to_frame,
+    pose_to_matrix,
+)
+
+from .jogplan import CREDIT, JogPlan, JogRequest, plan_jog
+from .link import RobotLink
+
+__all__ = ["HOLD_TIMEOUT", "TOPUP", "JogController"]
+
+log = logging.getLogger(__name__)
+
+#: The jog stops when the page has not repeated its keep-alive for this long (it sends one
+#: every 25 ms, so four in a row were lost or the page froze).
+HOLD_TIMEOUT = 0.1
+#: Seconds between credit top-ups while a continuous jog is held.
+TOPUP = 0.04
+#: Increments that may already be planned or running beyond the PC's last view of the robot.
+IN_FLIGHT = 3
+#: Keep this far (deg) from a software limit switch.
+LIMIT_MARGIN = 0.5
+#: A Cartesian jog stops before a joint would jump this far (deg): a wrist singularity.
+JUMP = 20.0
+
+
+@dataclass
+class _Jog:
+    owner: object
+    press: int
+    req: JogRequest
+    plan: JogPlan
+    started: float
+    last_hold: float
+    last_topup: float = 0.0
+
+
+def advance_pose(pose: np.ndarray, inc: np.ndarray, n: float, *, tool: bool) -> np.ndarray:
+    """``pose`` moved ``n`` increments: in $BASE (about the base axes at the TCP) or in $TOOL."""
+    start = pose_to_matrix(pose)
+    step = pose_to_matrix(np.asarray(inc) * n)
+    if tool:
+        return np.asarray(matrix_to_frame(start @ step), dtype=np.float64)
+    end = start.copy()
+    end[:3, :3] = step[:3, :3] @ start[:3, :3]
+    end[:3, 3] += step[:3, 3]
+    return np.asarray(matrix_to_frame(end), dtype=np.float64)
+
+
+class JogController:
+    """The single jog in progress (see the module docstring)."""
+
+    def __init__(
+        self,
+        client: Client,
+        link: RobotLink,
+        *,
+        model: RobotModel,
+        hold_timeout: float = HOLD_TIMEOUT,
+        credit: int = CREDIT,
+    ) -> None:
+        self.client = client
+        self.link = link
+        self.model = model
+        self.hold_timeout = hold_timeout
+        self.credit = credit
+        self.jog: _Jog | None = None
+        self._lock = asyncio.Lock()
+        #: Why the last jog ended (shown on the page), and when.
+        self.last_stop: tuple[str, float] | None = None
+        self._done: dict[object, int] = {}  # owner -> last press that ended (never restart it)
+
+    # --- what the page sees -----------------------------------------------------------------
+    def describe(self, owner: object) -> dict[str, Any]:
+        jog = self.jog
+        out: dict[str, Any] = {"active": jog is not None, "mine": False, "label": None}
+        if jog is not None:
+            unit = "mm/s" if jog.req.frame != "axis" and jog.req.index < 3 else "deg/s"
+            out.update(
+                mine=jog.owner is owner,
+                label=jog.req.label,
+                speed=round(jog.plan.speed, 2),
+                unit=unit,
+            )
+        if self.last_stop is not None:
+            out["stopped"] = self.last_stop[0]
+        return out
+
+    # --- events from the pages --------------------------------------------------------------
+    async def press(self, owner: object, press: int, req: JogRequest) -> str | None:
+        """Start (or keep alive) a jog; returns why it was refused, or None."""
+        now = time.monotonic()
+        jog = self.jog
+        if jog is not None:
+            if jog.owner is not owner:
+                return "another page is jogging"
+            if jog.press == press:
+                jog.last_hold = now
+                if req.override != jog.req.override and req.step is None:
+                    await self._retune(jog, req)
+                return None
+            await self.stop(owner, "new press")
+        if self._done.get(owner) == press:
+            return None  # this press already ended (released, timed out or step done)
+        reason = self.link.jog_ready()
+        if reason is not None:
+            self._done[owner] = press
+            return reason
+        plan = plan_jog(req, self.model)
+        credit = self._credit(req, plan, whole=req.step is not None)
+        if credit <= 0:
+            self._done[owner] = press
+            return self._limit_text(req)
+        async with self._lock:
+            self.jog = _Jog(owner, press, req, plan, now, now, last_topup=now)
+            try:
+                await self.client.write_many(plan.start_writes(min(credit, self.credit)))
+            except (KvpError, OSError) as exc:
+                self.jog = None
+                self._done[owner] = press
+                await self._zero(plan)
+                return f"jog write failed: {exc}"
+        log.info("jog %s at %.3g/s", req.label, plan.speed)
+        return None
+
+    async def release(self, owner: object, reason: str = "released") -> None:
+        """The owner's button came up (or its page went away): stop now."""
+        jog = self.jog
+        if jog is not None and jog.owner is owner:
+            await self.stop(owner, reason)
+
+    async def stop(self, owner: object | None, reason: str) -> None:
+        async with self._lock:
+            jog = self.jog
+            if jog is None or (owner is not None and jog.owner is not owner):
+                return
+            self.jog = None
+            self._done[jog.owner] = jog.press
+            self.last_stop = (reason, time.monotonic())
+            await self._zero(jog.plan)
+        log.info("jog %s stopped: %s", jog.req.label, reason)
+
+    def forget(self, owner: object) -> None:
+        self._done.pop(owner, None)
+
+    async def _zero(self, plan: JogPlan) -> None:
+        try:
+            await self.client.write_many(plan.stop_writes())
+        except (KvpError, OSError) as exc:
+            # The robot still stops: its credit runs out within CREDIT increments.
+            log.warning("jog stop write failed (%s); the robot's credit runs out instead", exc)
+
+    async def _retune(self, jog: _Jog, req: JogRequest) -> None:
+        plan = plan_jog(req, self.model)
+        async with self._lock:
+            if self.jog is not jog:
+                return
+            jog.req, jog.plan = req, plan
+            writes = plan.start_writes(self.credit)[:4]  # accelerations and increment
+            try:
+                await self.client.write_many(writes)
+            except (KvpError, OSError) as exc:
+                log.warning("jog override change failed: %s", exc)
+
+    # --- the watchdog and the credit --------------------------------------------------------
+    async def run(self, period: float = 0.01) -> None:
+        """Stop on a missing keep-alive, top up the credit, notice a finished step."""
+        while True:
+            await asyncio.sleep(period)
+            jog = self.jog
+            if jog is None:
+                continue
+            now = time.monotonic()
+            if now - jog.last_hold > self.hold_timeout:
+                ms = self.hold_timeout * 1e3
+                await self.stop(jog.owner, f"no keep-alive from the page for {ms:.0f} ms")
+                continue
+            if now - jog.last_topup < TOPUP:
+                continue
+            jog.last_topup = now
+            if jog.req.step is not None:
+                await self._check_step(jog)
+            else:
+                await self._topup(jog)
+
+    async def _topup(self, jog: _Jog) -> None:
+        credit = min(self.credit, self._credit(jog.req, jog.plan, whole=False))
+        if credit <= 0:
+            await self.stop(jog.owner, self._limit_text(jog.req))
+            return
+        try:
+            await self.client.write("JOG_LEFT", str(credit))
+        except (KvpError, OSError) as exc:
+            await self.stop(jog.owner, f"credit write failed: {exc}")
+
+    async def _check_step(self, jog: _Jog) -> None:
+        try:
+            left = int(await self.client.read("JOG_LEFT"))
+        except (KvpError, OSError, ValueError) as exc:
+            await self.stop(jog.owner, f"cannot read JOG_LEFT: {exc}")
+            return
+        if left <= 0 and self.jog is jog:
+            await self.stop(jog.owner, "step done")
+
+    def _credit(self, req: JogRequest, plan: JogPlan, *, whole: bool) -> int:
+        """Increments the robot may plan without passing a limit (``whole``: the full step)."""
+        need = plan.count if whole and plan.count is not None else self.credit
+        if req.frame == "axis":
+            q = self.link.axes()
+            if q is None:
+                return 0
+            lo, hi = self.link.limits()
+            i, step = req.index, abs(float(plan.increment[req.index]))
+            room = (
+                (hi[i] - LIMIT_MARGIN - q[i])
+                if req.direction > 0
+                else (q[i] - lo[i] - LIMIT_MARGIN)
+            )
+            fit = math.floor(room / step + 1e-9) - (0 if whole else IN_FLIGHT)
+            return max(0, min(need, fit))
+        return need if self._reachable(req, plan, need + (0 if whole else IN_FLIGHT)) else 0
+
+    def _reachable(self, req: JogRequest, plan: JogPlan, n: int) -> bool:
+        """Whether the TCP can go ``n`` increments on without leaving the workspace or the
+        limits, or swinging a joint through a singularity (the KRC would stop the program)."""
+        pose, q = self.link.pose(), self.link.axes()
+        if pose is None or q is None:
+            return False
+        tool, base = self.link.frame("$TOOL"), self.link.frame("$BASE")
+        ahead = advance_pose(pose, plan.increment, n, tool=req.frame == "tool")
+        try:
+            q_ahead = inverse(self.model, ahead, current=q, tool=tool, base=base)
+        except UnreachableError:
+            return False
+        lo, hi = self.link.limits()
+        if np.any(q_ahead > hi - LIMIT_MARGIN) or np.any(q_ahead < lo + LIMIT_MARGIN):
+            return False
+        return bool(np.max(np.abs(q_ahead - q)) < JUMP + n * 0.5)
+
+    @staticmethod
+    def _limit_text(req: JogRequest) -> str:
+        if req.frame == "axis":
+            sign = "+" if req.direction > 0 else "-"
+            return f"software limit {sign}{req.key} ahead"
+        return f"{req.key} {'+' if req.direction > 0 else '-'}: out of reach or a singularity ahead"

@@ -1,0 +1,329 @@
+"""`kvp web` without a browser: the KVP_JOG program, the jog controller and the WebSocket server.
+
+Everything runs over real TCP: the emulator runs the shipped KVP_JOG program, the web server
+talks KVP to it, and the test talks WebSocket to the server like the page does. The stop
+bounds are checked in the emulator's simulated time (load on the machine cannot change them);
+wall-clock stop latencies are measured by bench/web_jog.py.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from collections.abc import AsyncIterator
+from typing import Any
+
+import numpy as np
+import pytest
+import websockets
+from hypothesis import given
+from hypothesis import strategies as st
+from websockets.asyncio.client import ClientConnection, connect
+
+from kukavarproxy_emu import Emulator, EmulatorConfig
+from pyopenshowvar import Client
+from pyopenshowvar.kinematics import KR6R900SIXX
+from pyopenshowvar_apps.web.jogplan import (
+    AXIS_KEYS,
+    AXIS_SPEED,
+    CADENCE,
+    CART_KEYS,
+    JogRequest,
+    plan_jog,
+)
+from pyopenshowvar_apps.web.runner import KRL_DIR, WebServer
+
+TOKEN = "test-token-123"
+JOG = {"t": "jog", "press": 1, "frame": "axis", "key": "A1", "dir": 1, "ov": 100}
+
+
+def jog_config(**kw: Any) -> EmulatorConfig:
+    return EmulatorConfig(
+        port=0,
+        program=str(KRL_DIR / "kvp_jog.src"),
+        config_files=(KRL_DIR / "kvp_jog_config.dat",),
+        **kw,
+    )
+
+
+@pytest.fixture
+async def rig() -> AsyncIterator[tuple[Emulator, WebServer]]:
+    async with (
+        Emulator(jog_config()) as emu,
+        WebServer("127.0.0.1", emu.port, token=TOKEN, emulated=True) as web,
+    ):
+        yield emu, web
+
+
+async def page(web: WebServer) -> ClientConnection:
+    # max_queue=None: a test that does not read every state must still see the close frame
+    ws = await connect(f"ws://127.0.0.1:{web.port}/ws?token={TOKEN}", max_queue=None)
+    hello = json.loads(await ws.recv())
+    assert hello["t"] == "hello" and hello["emulated"] is True
+    return ws
+
+
+async def until(predicate: Any, timeout: float = 5.0) -> None:
+    async with asyncio.timeout(timeout):
+        while not await predicate():
+            await asyncio.sleep(0.01)
+
+
+async def hold(ws: ClientConnection, seconds: float, msg: dict[str, Any] = JOG) -> None:
+    """Press and keep the button down like the page: a keep-alive every 25 ms."""
+    end = asyncio.get_running_loop().time() + seconds
+    while asyncio.get_running_loop().time() < end:
+        await ws.send(json.dumps(msg))
+        await asyncio.sleep(0.025)
+
+
+async def settled(kvp: Client) -> float:
+    """A1 once the robot stands still and the jog program is idle again."""
+
+    async def idle() -> bool:
+        return await kvp.read("JOG_MODE") == "0"
+
+    await until(idle)
+    a, b = 0.0, 1.0
+    while a != b:
+        a = (await kvp.read_joint_angles())[0]
+        await asyncio.sleep(0.05)
+        b = (await kvp.read_joint_angles())[0]
+    return float(b)
+
+
+# --- the arithmetic of one press (pure) -----------------------------------------------------
+@given(
+    frame=st.sampled_from(["axis", "base", "tool"]),
+    index=st.integers(0, 5),
+    direction=st.sampled_from([-1, 1]),
+    ov=st.floats(1, 100),
+    step=st.none() | st.sampled_from([0.1, 1.0, 10.0]),
+)
+def test_plan_keeps_cadence_and_limits(
+    frame: str, index: int, direction: int, ov: float, step: float | None
+) -> None:
+    keys = AXIS_KEYS if frame == "axis" else CART_KEYS
+    req = JogRequest(frame, keys[index], direction, step, ov)  # type: ignore[arg-type]
+    plan = plan_jog(req, KR6R900SIXX)
+    inc = plan.increment
+    assert np.count_nonzero(inc) == 1 and np.sign(inc[index]) == direction
+    if step is not None:  # step mode: equal increments adding up to exactly the step
+        assert plan.count is not None and abs(abs(inc[index]) * plan.count - step) < 1e-9
+    if frame == "axis":
+        acc, a_max = plan.acc[0], KR6R900SIXX.max_accel[index]
+        assert 1 <= acc <= 100
+        # A triangular increment at this acceleration lasts ~2 cadences (INT % rounding aside)
+        if acc >= 5 and step is None:
+            t = np.sqrt(abs(inc[index]) / (a_max * acc / 100))
+            assert abs(t - CADENCE) < 0.1 * CADENCE
+    writes = plan.start_writes(5)
+    assert writes[-1][0] == "JOG_MODE" and writes[-2][0] == "JOG_LEFT"
+    assert plan.stop_writes()[0][0] == plan.target  # the increment is zeroed first
+
+
+def test_axis_speeds_stop_within_one_cadence() -> None:
+    # Every jog speed can be braked to zero within one cadence at the axis' acceleration limit.
+    assert np.all(np.array(AXIS_SPEED) <= KR6R900SIXX.max_accel * CADENCE)
+
+
+@pytest.mark.parametrize(
+    ("kw", "error"),
+    [
+        ({"frame": "joint", "key": "A1"}, "frame"),
+        ({"frame": "axis", "key": "X"}, "keys"),
+        ({"frame": "base", "key": "X", "direction": 0}, "direction"),
+        ({"frame": "base", "key": "X", "step": 50.0}, "step"),
+        ({"frame": "tool", "key": "C", "override": 0.0}, "override"),
+    ],
+)
+def test_bad_requests_are_refused(kw: dict[str, Any], error: str) -> None:
+    kw.setdefault("direction", 1)
+    with pytest.raises(ValueError, match=error):
+        JogRequest(**kw)
+
+
+# --- the KRL program on the emulator --------------------------------------------------------
+async def test_krl_stop_bound_in_simulated_time() -> None:
+    """After the PC zeroes the increment the robot moves for at most 3 cadences + 1 IPO."""
+    async with Emulator(jog_config()) as emu, Client("127.0.0.1", emu.port) as kvp:
+        robot = emu.robot
+        assert robot is not None
+        plan = plan_jog(JogRequest("axis", "A1", 1, None, 100.0), KR6R900SIXX)
+        await asyncio.sleep(0.1)  # KVP_JOG clears JOG_MODE/JOG_LEFT when it starts
+        await kvp.write_many(plan.start_writes(5))
+        for _ in range(15):
+            await kvp.write("JOG_LEFT", "5")
+            await asyncio.sleep(0.04)
+        robot.kernel.trace = []
+        await kvp.write_many(plan.stop_writes())
+        t_zero = robot.time
+        await asyncio.sleep(0.3)
+        moving = [t for t, _, qd in robot.kernel.trace if np.any(np.abs(qd) > 1e-9)]
+        assert moving, "the robot was not moving when the stop was written"
+        assert moving[-1] - t_zero <= 3 * CADENCE + robot.kernel.ipo + 1e-9
+        # ... and on its own when the PC stops topping up the credit (the robot's watchdog)
+        await kvp.write_many(plan.start_writes(5))
+        robot.kernel.trace = []
+        t_silent = robot.time
+        await asyncio.sleep(0.5)
+        moving = [t for t, _, qd in robot.kernel.trace if np.any(np.abs(qd) > 1e-9)]
+        assert moving and moving[-1] - t_silent <= (5 + 2) * CADENCE + 2 * robot.kernel.ipo
+        assert await kvp.read("JOG_LEFT") == "0"  # the credit is used up: it waits
+
+
+async def test_tool_increment_runs_in_the_tcp_frame(tmp_path: Any) -> None:
+    """``LIN_REL … #TOOL`` (needed by the Tool jog) moves along the TCP's own axes."""
+    src = tmp_path / "tooljog.src"
+    src.write_text(
+        "DEF TOOLJOG()\n  PTP {A1 0, A2 -90, A3 90, A4 0, A5 30, A6 0}\n"
+        "  LIN_REL {X 10.0} #TOOL\n  DONE = TRUE\nEND\n"
+    )
+    (tmp_path / "tooljog.dat").write_text("DEFDAT TOOLJOG\nDECL BOOL DONE=FALSE\nENDDAT\n")
+    async with Emulator(EmulatorConfig(port=0, program=str(src), speed=20)) as emu:
+        async with Client("127.0.0.1", emu.port) as kvp:
+
+            async def done() -> bool:
+                return await kvp.read("DONE") == "TRUE" and not emu.robot.kernel.moving  # type: ignore[union-attr]
+
+            await until(done)
+            pose = await kvp.read_pose()
+    from pyopenshowvar.kinematics import fk_matrix
+
+    start = fk_matrix(KR6R900SIXX, [0, -90, 90, 0, 30, 0])
+    expected = start[:3, 3] + 10.0 * start[:3, 0]  # 10 mm along the flange's own x axis
+    assert np.allclose([pose.x, pose.y, pose.z], expected, atol=1e-3)
+
+
+# --- through the web server, like the page --------------------------------------------------
+async def test_jog_moves_and_stops_on_release(rig: tuple[Emulator, WebServer]) -> None:
+    emu, web = rig
+    async with Client("127.0.0.1", emu.port) as kvp:
+        ws = await page(web)
+        await hold(ws, 0.4)
+        assert await kvp.read("JOG_MODE") == "1"
+        await ws.send(json.dumps({"t": "release"}))
+        a1 = await settled(kvp)
+        assert a1 > 0.5, "A1 did not move"
+        await asyncio.sleep(0.1)
+        assert (await kvp.read_joint_angles())[0] == a1
+        # The same press does not start again: its keep-alives after release are ignored
+        await hold(ws, 0.1)
+        assert await kvp.read("JOG_MODE") == "0"
+        await ws.close()
+
+
+async def test_dropped_connection_and_silent_page_stop_the_jog(
+    rig: tuple[Emulator, WebServer],
+) -> None:
+    emu, web = rig
+    async with Client("127.0.0.1", emu.port) as kvp:
+        ws = await page(web)
+        await hold(ws, 0.3)
+        ws.transport.abort()  # the TCP connection drops without a closing handshake
+        a1 = await settled(kvp)
+        assert a1 > 0.1 and web.jog.last_stop is not None
+        assert "lost" in web.jog.last_stop[0]
+        ws = await page(web)  # a page that freezes: no release, no keep-alive
+        await ws.send(json.dumps({**JOG, "press": 2}))
+        await settled(kvp)
+        assert web.jog.last_stop is not None and "keep-alive" in web.jog.last_stop[0]
+        await ws.close()
+
+
+async def test_step_mode_moves_exactly_one_step(rig: tuple[Emulator, WebServer]) -> None:
+    emu, web = rig
+    async with Client("127.0.0.1", emu.port) as kvp:
+        ws = await page(web)
+        await hold(ws, 0.8, {**JOG, "key": "A6", "dir": -1, "step": 1.0})
+        await ws.send(json.dumps({"t": "release"}))
+        await settled(kvp)
+        q = await kvp.read_joint_angles()
+        assert q[5] == pytest.approx(-1.0, abs=1e-3)
+        assert web.jog.last_stop is not None and web.jog.last_stop[0] == "step done"
+        await ws.close()
+
+
+async def test_jog_stops_before_the_software_limit() -> None:
+    config = jog_config()
+    async with Emulator(config) as emu:
+        emu.store.set_system("$SOFTP_END[1]", 3.0)
+        async with (
+            WebServer("127.0.0.1", emu.port, token=TOKEN, emulated=True) as web,
+            Client("127.0.0.1", emu.port) as kvp,
+        ):
+            await until(lambda: _true(web.link.seq > 2))
+            ws = await page(web)
+            await hold(ws, 0.8)
+            a1 = await settled(kvp)
+            assert 1.0 < a1 <= 3.0 - 0.5 + 1e-6  # stops short of the limit, with the margin
+            assert await kvp.read("$PRO_STATE1") == "#P_ACTIVE"  # no limit-switch stop
+            assert web.jog.last_stop is not None and "limit" in web.jog.last_stop[0]
+            await ws.close()
+
+
+async def _true(value: bool) -> bool:
+    return value
+
+
+async def test_live_state_watch_list_and_writes(rig: tuple[Emulator, WebServer]) -> None:
+    emu, web = rig
+    ws = await page(web)
+    await ws.send(json.dumps({"t": "watch", "names": ["$OV_PRO", "NOPE_VAR"]}))
+    await ws.send(json.dumps({"t": "write", "id": 7, "name": "$OV_PRO", "value": "55"}))
+    seen: dict[str, Any] = {}
+    async with asyncio.timeout(5):
+        while "NOPE_VAR" not in seen or seen.get("$OV_PRO", {}).get("text") != "55":
+            msg = json.loads(await ws.recv())
+            if msg["t"] == "state":
+                assert len(msg["axes"]) == 6 and len(msg["arm"]) == 8
+                assert msg["program"]["name"] == "KVP_JOG" and msg["program"]["jog_ready"] is None
+                seen.update(msg["watch"])
+            elif msg["t"] == "result":
+                assert msg == {"t": "result", "id": 7, "name": "$OV_PRO", "text": "55"}
+    assert seen["NOPE_VAR"]["error"]
+    await ws.close()
+
+
+# --- security and abuse ---------------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("query", "headers"),
+    [("", {}), ("?token=wrong-token", {}), (f"?token={TOKEN}", {"Origin": "http://evil.example"})],
+)
+async def test_websocket_refused_without_token_or_from_elsewhere(
+    rig: tuple[Emulator, WebServer], query: str, headers: dict[str, str]
+) -> None:
+    _, web = rig
+    with pytest.raises(websockets.exceptions.InvalidStatus) as info:
+        await connect(f"ws://127.0.0.1:{web.port}/ws{query}", additional_headers=headers)
+    assert info.value.response.status_code == 403
+
+
+async def test_abuse_is_bounded(rig: tuple[Emulator, WebServer]) -> None:
+    emu, web = rig
+    ws = await page(web)
+    await ws.send(json.dumps({"t": "read", "id": 1, "name": "x" * 500}))
+    await ws.send("not json")
+    await ws.send(json.dumps({"t": "jog", "press": 1, "frame": "axis", "key": "Q9", "dir": 1}))
+    errors = 0
+    async with asyncio.timeout(5):
+        while errors < 3:
+            errors += json.loads(await ws.recv())["t"] == "error"
+    big = await page(web)
+    await big.send("x" * 10_000)  # larger than MAX_MESSAGE: the connection is closed
+    with pytest.raises(websockets.exceptions.ConnectionClosed):
+        async with asyncio.timeout(5):
+            while True:
+                await big.recv()
+    flood = await page(web)
+    with pytest.raises(websockets.exceptions.ConnectionClosed):
+        async with asyncio.timeout(5):
+            for _ in range(5000):  # far beyond the per-connection message budget
+                await flood.send('{"t": "watch", "names": []}')
+            while True:
+                await flood.recv()
+    # The well-behaved page is still served
+    async with asyncio.timeout(5):
+        while json.loads(await ws.recv())["t"] != "state":
+            pass
+    await ws.close()
