@@ -34,6 +34,7 @@ SCRIPTS = [
     ("CLI", "cli_startup.py"),
     ("Latency profile", "latency_pacing.py"),
     ("Motion kernel", "motion_kss.py"),
+    ("Web jog pad", "web_jog.py"),
 ]
 
 

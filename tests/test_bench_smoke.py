@@ -28,6 +28,7 @@ BENCH = Path(__file__).resolve().parents[1] / "bench"
         ("cli_startup.py", "kvp read start-up"),
         ("latency_pacing.py", "paced"),
         ("motion_kss.py", "A2 reversal"),
+        ("web_jog.py", "jog stop latency after release"),
     ],
 )
 def test_benchmark_runs_quick(script: str, expect: str) -> None:

@@ -18,11 +18,6 @@ import pytest
 import websockets
 from hypothesis import given
 from hypothesis import strategies as st
-from websockets.asyncio.client import ClientConnection, connect
-
-from kukavarproxy_emu import Emulator, EmulatorConfig
-from pyopenshowvar import Client
-from pyopenshowvar.kinematics import KR6R900SIXX
 from pyopenshowvar_apps.web.jogplan import (
     AXIS_KEYS,
     AXIS_SPEED,
@@ -32,6 +27,11 @@ from pyopenshowvar_apps.web.jogplan import (
     plan_jog,
 )
 from pyopenshowvar_apps.web.runner import KRL_DIR, WebServer
+from websockets.asyncio.client import ClientConnection, connect
+
+from kukavarproxy_emu import Emulator, EmulatorConfig
+from pyopenshowvar import Client
+from pyopenshowvar.kinematics import KR6R900SIXX
 
 TOKEN = "test-token-123"
 JOG = {"t": "jog", "press": 1, "frame": "axis", "key": "A1", "dir": 1, "ov": 100}
@@ -65,7 +65,7 @@ async def page(web: WebServer) -> ClientConnection:
 
 async def until(predicate: Any, timeout: float = 5.0) -> None:
     async with asyncio.timeout(timeout):
-        while not await predicate():
+        while not await predicate():  # noqa: ASYNC110 - polling a browser or KVP is what a client does
             await asyncio.sleep(0.01)
 
 
@@ -267,7 +267,7 @@ async def _true(value: bool) -> bool:
 
 
 async def test_live_state_watch_list_and_writes(rig: tuple[Emulator, WebServer]) -> None:
-    emu, web = rig
+    _, web = rig
     ws = await page(web)
     await ws.send(json.dumps({"t": "watch", "names": ["$OV_PRO", "NOPE_VAR"]}))
     await ws.send(json.dumps({"t": "write", "id": 7, "name": "$OV_PRO", "value": "55"}))
@@ -300,7 +300,7 @@ async def test_websocket_refused_without_token_or_from_elsewhere(
 
 
 async def test_abuse_is_bounded(rig: tuple[Emulator, WebServer]) -> None:
-    emu, web = rig
+    _, web = rig
     ws = await page(web)
     await ws.send(json.dumps({"t": "read", "id": 1, "name": "x" * 500}))
     await ws.send("not json")
@@ -327,3 +327,22 @@ async def test_abuse_is_bounded(rig: tuple[Emulator, WebServer]) -> None:
         while json.loads(await ws.recv())["t"] != "state":
             pass
     await ws.close()
+
+
+async def test_loopback_without_token_refuses_other_host_names() -> None:
+    """No token on loopback, but a page that re-points its own name here (DNS rebinding) or
+    comes from elsewhere gets nothing."""
+    async with Emulator(jog_config()) as emu, WebServer("127.0.0.1", emu.port) as web:
+        for request in (
+            "GET / HTTP/1.1\r\nHost: evil.example:80\r\n",
+            "GET /ws HTTP/1.1\r\nHost: evil.example\r\nOrigin: http://evil.example\r\n"
+            "Upgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Version: 13\r\n"
+            "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n",
+        ):
+            reader, writer = await asyncio.open_connection("127.0.0.1", web.port)
+            writer.write(request.encode() + b"\r\n")
+            assert (await reader.readline()).startswith(b"HTTP/1.1 400")
+            writer.close()
+        ws = await connect(f"ws://127.0.0.1:{web.port}/ws")  # the real page: no token needed
+        assert json.loads(await ws.recv())["t"] == "hello"
+        await ws.close()

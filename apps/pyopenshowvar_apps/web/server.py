@@ -7,8 +7,9 @@ jog, watch-list, read and write commands as small JSON messages.
 Security: when a token is required (bound beyond loopback, or ``--token`` given) the
 WebSocket is refused (HTTP 403) without ``?token=``; since every read, write and jog goes
 through the WebSocket, nothing moves or is written without it. The Origin header must name
-this server, so a web page from elsewhere cannot drive the robot through a user's browser, and
-the page may not be framed (no click-jacking of the jog buttons).
+this server, so a web page from elsewhere cannot drive the robot through a user's browser;
+without a token (loopback) the Host header must be a loopback name too (no DNS rebinding);
+and the page may not be framed (no click-jacking of the jog buttons).
 
 Abuse is bounded per connection: a message is at most :data:`MAX_MESSAGE` bytes (the
 WebSocket layer refuses larger ones), at most :data:`RATE` messages a second (a burst of
@@ -30,6 +31,7 @@ from typing import Any
 from starlette.applications import Starlette
 from starlette.datastructures import MutableHeaders
 from starlette.middleware import Middleware
+from starlette.middleware.trustedhost import TrustedHostMiddleware
 from starlette.requests import Request
 from starlette.responses import FileResponse, Response
 from starlette.routing import Mount, Route, WebSocketRoute
@@ -65,13 +67,18 @@ HEADERS = {
 }
 
 
-class WebConfig:
-    """What the server needs besides the robot: the token and a few labels for the page."""
+#: Host headers accepted when no token is required: the server is then on loopback, and a
+#: web page from elsewhere that re-points its own name at 127.0.0.1 (DNS rebinding) must not
+#: reach it (its requests carry its own name in Host and Origin).
+LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1", "[::1]")
 
-    def __init__(self, *, token: str | None, emulated: bool = False, robot: str = "") -> None:
+
+class WebConfig:
+    """What the server needs besides the robot: the token and a label for the page."""
+
+    def __init__(self, *, token: str | None, emulated: bool = False) -> None:
         self.token = token
         self.emulated = emulated
-        self.robot = robot
 
 
 class _Page:
@@ -186,7 +193,6 @@ def create_app(link: RobotLink, jog: JogController, config: WebConfig) -> Starle
         return {
             "t": "hello",
             "emulated": config.emulated,
-            "robot": config.robot,
             "axis_speed": AXIS_SPEED,
             "cart_speed": CART_SPEED,
             "steps": STEP_SIZES,
@@ -264,7 +270,11 @@ def create_app(link: RobotLink, jog: JogController, config: WebConfig) -> Starle
         Mount("/static", StaticFiles(directory=STATIC), name="static"),
         WebSocketRoute("/ws", stream),
     ]
-    return Starlette(routes=routes, middleware=[Middleware(_SecurityHeaders)])
+    middleware = [Middleware(_SecurityHeaders)]
+    if config.token is None:
+        middleware.append(Middleware(TrustedHostMiddleware, allowed_hosts=list(LOOPBACK_HOSTS)))
+    return Starlette(routes=routes, middleware=middleware)
+
 
 class _SecurityHeaders:
     """Adds :data:`HEADERS` to every HTTP response (pages, scripts, errors)."""

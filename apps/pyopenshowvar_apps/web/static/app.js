@@ -14,6 +14,8 @@ const CART = ["X", "Y", "Z", "A", "B", "C"];
 const token = new URLSearchParams(location.hash.slice(1)).get("token")
   || sessionStorage.getItem("kvp-token") || "";
 if (token) sessionStorage.setItem("kvp-token", token);
+// A token pasted into the address bar changes only the fragment: start again with it.
+window.addEventListener("hashchange", () => location.reload());
 
 const ui = { frame: "axis", step: 0, ov: Number(localStorage.getItem("kvp-jog-ov") || 50) };
 const stats = { t0: performance.now(), firstState: null, times: [], rate: 0, states: 0 };

@@ -18,7 +18,7 @@ const V = {
 
 // Link radii (mm) from the base outwards; the last ones repeat.
 const RADII = [75, 60, 55, 45, 40, 32, 28, 22];
-const HOME_VIEW = { yaw: -0.9, pitch: 0.42, dist: 2600 };
+const HOME_VIEW = { yaw: -0.9, pitch: 0.38, dist: 2000 };
 
 class ArmView {
   constructor(canvas) {
@@ -26,7 +26,7 @@ class ArmView {
     this.ctx = canvas.getContext("2d");
     this.frames = null;
     Object.assign(this, HOME_VIEW);
-    this.target = [250, 0, 450];
+    this.target = [220, 0, 420];
     this.pointers = new Map();
     this.dirty = true;
     this._bind();
@@ -73,7 +73,7 @@ class ArmView {
     return (p) => {
       const d = V.sub(p, eye);
       const z = Math.max(V.dot(d, fwd), 1);
-      return { x: w / 2 + (f * V.dot(d, right)) / z, y: h * 0.56 - (f * V.dot(d, up)) / z, z, s: f / z };
+      return { x: w / 2 + (f * V.dot(d, right)) / z, y: h * 0.52 - (f * V.dot(d, up)) / z, z, s: f / z };
     };
   }
 
