@@ -43,6 +43,9 @@ from pyopenshowvar import Client
 from pyopenshowvar.kinematics import KR6R900SIXX
 
 JOG = {"t": "jog", "frame": "axis", "key": "A1", "ov": 100}
+#: Seconds a button is held before the trigger, and the window watched after it (--quick
+#: shortens both: the smoke test only checks that the script runs).
+HOLD, WATCH = 0.5, 0.5
 CHROMIUM_ARGS = [
     "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
     "--disable-background-networking", "--disable-component-update", "--disable-sync",
@@ -54,7 +57,7 @@ async def stop_latency(kvp: Client, trigger: Callable[[], Awaitable[None]]) -> f
     t0 = time.monotonic()
     await trigger()
     samples: list[tuple[float, float]] = []
-    while time.monotonic() - t0 < 0.5:
+    while time.monotonic() - t0 < WATCH:
         a1 = float((await kvp.read_joint_angles())[0])
         samples.append((time.monotonic(), a1))
     final = samples[-1][1]
@@ -96,7 +99,7 @@ async def ws_triggers(web: WebProcess, kvp: Client, n: int) -> dict[str, list[fl
             ws = await ws_page(web)
             press += 1
             holder = Holder(ws, press, 1 if (i + press) % 2 else -1)
-            await asyncio.sleep(0.5)
+            await asyncio.sleep(HOLD)
 
             async def trigger(holder: Holder = holder, name: str = name) -> None:
                 await holder.stop()
@@ -119,7 +122,7 @@ async def silent_pc(kvp: Client, port: int, n: int) -> list[float]:
         for i in range(n):
             plan = plan_jog(JogRequest("axis", "A1", 1 if i % 2 else -1, None, 100.0), KR6R900SIXX)
             await pc.write_many(plan.start_writes(5))
-            for _ in range(12):
+            for _ in range(int(HOLD / 0.04)):
                 await pc.write("JOG_LEFT", "5")
                 await asyncio.sleep(0.04)
 
@@ -166,7 +169,7 @@ async def browser_figures(web: WebProcess, kvp: Client, n: int) -> dict[str, Any
                 sign = "1" if i % 2 else "-1"
                 await page.locator(f'.jog[data-key="A1"][data-dir="{sign}"]').hover()
                 await page.mouse.down()
-                await asyncio.sleep(0.5)
+                await asyncio.sleep(HOLD)
 
                 async def trigger(name: str = name, page: Any = page) -> None:
                     if name == "tab hidden":
@@ -217,11 +220,16 @@ class WebProcess:
             self.proc.kill()
 
 
-async def jog_ready(kvp: Client) -> None:
-    """Until KVP_JOG runs and the pad's first live state can have arrived."""
-    while await kvp.read("$PRO_STATE1") != "#P_ACTIVE":  # noqa: ASYNC110 - polling a browser or KVP is what a client does
+async def jog_ready(kvp: Client, web: WebProcess) -> None:
+    """Until KVP_JOG runs and the pad has seen it (a press is refused before that)."""
+    while await kvp.read("$PRO_STATE1") != "#P_ACTIVE":  # noqa: ASYNC110 - polling KVP
         await asyncio.sleep(0.05)
-    await asyncio.sleep(1.0)
+    ws = await ws_page(web)
+    while True:
+        state = json.loads(await ws.recv())
+        if state.get("t") == "state" and state["program"]["jog_ready"] is None:
+            break
+    await ws.close()
 
 
 async def run(n: int, quick: bool, plant: str | None) -> tuple[list[Row], dict[str, Any]]:
@@ -234,7 +242,7 @@ async def run(n: int, quick: bool, plant: str | None) -> tuple[list[Row], dict[s
         web = WebProcess(emu.port)
         try:
             async with Client("127.0.0.1", emu.port) as kvp:
-                await jog_ready(kvp)
+                await jog_ready(kvp, web)
                 ws = await ws_triggers(web, kvp, n)
                 pc = await silent_pc(kvp, emu.port, n)
                 browser = None if quick else await browser_figures(web, kvp, n)
@@ -296,7 +304,10 @@ def main() -> None:
     ap = base_parser(__doc__)
     ap.add_argument("--plant", default=None, help="emulator plant (when the emulator has one)")
     args = ap.parse_args()
+    global HOLD, WATCH
     n = 1 if args.quick else (args.repeat or 10)
+    if args.quick:
+        HOLD, WATCH = 0.2, 0.25
     rows, extra = asyncio.run(run(n, args.quick, args.plant))
     info = machine_info()
     print(f"{info['cpu']}, {info['cores']} cores, load {info['load']}; plant {extra['plant']}")

@@ -78,18 +78,18 @@ async def hold(ws: ClientConnection, seconds: float, msg: dict[str, Any] = JOG) 
 
 
 async def settled(kvp: Client) -> float:
-    """A1 once the robot stands still and the jog program is idle again."""
+    """A1 once the robot stands still (all axes) and the jog program is idle again."""
 
     async def idle() -> bool:
         return await kvp.read("JOG_MODE") == "0"
 
     await until(idle)
-    a, b = 0.0, 1.0
-    while a != b:
-        a = (await kvp.read_joint_angles())[0]
+    a, b = np.zeros(6), np.ones(6)
+    while not np.array_equal(a, b):
+        a = await kvp.read_joint_angles()
         await asyncio.sleep(0.05)
-        b = (await kvp.read_joint_angles())[0]
-    return float(b)
+        b = await kvp.read_joint_angles()
+    return float(b[0])
 
 
 # --- the arithmetic of one press (pure) -----------------------------------------------------
@@ -241,6 +241,41 @@ async def test_step_mode_moves_exactly_one_step(rig: tuple[Emulator, WebServer])
         q = await kvp.read_joint_angles()
         assert q[5] == pytest.approx(-1.0, abs=1e-3)
         assert web.jog.last_stop is not None and web.jog.last_stop[0] == "step done"
+        await ws.close()
+
+
+async def test_cartesian_jogs_move_along_base_and_tool_axes(
+    rig: tuple[Emulator, WebServer],
+) -> None:
+    emu, web = rig
+    async with Client("127.0.0.1", emu.port) as kvp:
+        # Out of the wrist singularity of HOME (A5 = 0) first: a 10 degree A5 step.
+        plan = plan_jog(JogRequest("axis", "A5", 1, 10.0, 100.0), KR6R900SIXX)
+        await kvp.write_many(plan.start_writes(5))
+        async with asyncio.timeout(5):
+            while await kvp.read("JOG_LEFT") != "0" or emu.robot.kernel.moving:  # type: ignore[union-attr]  # noqa: ASYNC110
+                await asyncio.sleep(0.02)
+        await kvp.write_many(plan.stop_writes())
+        await asyncio.sleep(0.1)  # the pad sees the new pose
+        start = await kvp.read_pose()
+        ws = await page(web)
+        await hold(ws, 0.3, {**JOG, "press": 1, "frame": "base", "key": "X"})
+        await ws.send(json.dumps({"t": "release"}))
+        await settled(kvp)
+        moved = await kvp.read_pose()
+        assert moved.x - start.x > 5.0
+        assert abs(moved.y - start.y) < 1e-3 and abs(moved.z - start.z) < 1e-3
+        assert abs(moved.b - start.b) < 1e-3
+        from pyopenshowvar.kinematics import pose_to_matrix
+
+        axes = pose_to_matrix([moved.x, moved.y, moved.z, moved.a, moved.b, moved.c])
+        await hold(ws, 0.3, {**JOG, "press": 2, "frame": "tool", "key": "Z"})
+        await ws.send(json.dumps({"t": "release"}))
+        await settled(kvp)
+        end = await kvp.read_pose()
+        delta = np.array([end.x - moved.x, end.y - moved.y, end.z - moved.z])
+        assert np.linalg.norm(delta) > 5.0
+        assert np.allclose(delta / np.linalg.norm(delta), axes[:3, 2], atol=1e-4)  # tool z
         await ws.close()
 
 
