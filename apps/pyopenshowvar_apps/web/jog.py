@@ -215,6 +215,9 @@ class JogController:
                 await self._topup(jog)
 
     async def _topup(self, jog: _Jog) -> None:
+        if not self.link.connected:
+            await self.stop(jog.owner, "the live state of the robot is lost")
+            return
         credit = min(self.credit, self._credit(jog.req, jog.plan, whole=False))
         if credit <= 0:
             await self.stop(jog.owner, self._limit_text(jog.req))
@@ -242,11 +245,7 @@ class JogController:
                 return 0
             lo, hi = self.link.limits()
             i, step = req.index, abs(float(plan.increment[req.index]))
-            room = (
-                (hi[i] - LIMIT_MARGIN - q[i])
-                if req.direction > 0
-                else (q[i] - lo[i] - LIMIT_MARGIN)
-            )
+            room = float(hi[i] - q[i] if req.direction > 0 else q[i] - lo[i]) - LIMIT_MARGIN
             fit = math.floor(room / step + 1e-9) - (0 if whole else IN_FLIGHT)
             return max(0, min(need, fit))
         return need if self._reachable(req, plan, need + (0 if whole else IN_FLIGHT)) else 0

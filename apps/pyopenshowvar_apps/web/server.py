@@ -172,7 +172,8 @@ def create_app(link: RobotLink, jog: JogController, config: WebConfig) -> Starle
         pages.add(page)
         task = asyncio.create_task(sender(page))
         await ws.send_text(json.dumps(hello()))
-        page.state, _ = link.snapshot, page.wake.set()
+        page.state = link.snapshot
+        page.wake.set()
         try:
             while True:
                 text = await ws.receive_text()
