@@ -82,7 +82,7 @@ async def _settled(kvp: Client) -> float:
         while await kvp.read("JOG_MODE") != "0":  # noqa: ASYNC110 - polling a browser or KVP is what a client does
             await asyncio.sleep(0.02)
         a, b = 0.0, 1.0
-        while a != b:
+        while abs(a - b) > 1e-3:  # still, within a dynamic plant's encoder noise
             a = float((await kvp.read_joint_angles())[0])
             await asyncio.sleep(0.1)
             b = float((await kvp.read_joint_angles())[0])
@@ -126,7 +126,7 @@ async def test_jog_pad_in_chromium(browser: Any) -> None:
         assert a1 > 0.5, "A1 did not move while the button was held"
         assert web.jog.last_stop is not None and web.jog.last_stop[0] == "released"
         await asyncio.sleep(0.2)
-        assert float((await kvp.read_joint_angles())[0]) == a1, "A1 moved after the release"
+        assert abs(float((await kvp.read_joint_angles())[0]) - a1) < 1e-3, "A1 moved after release"
 
         # Hiding the tab while a button is held stops the jog too.
         await page.locator('.jog[data-key="A1"][data-dir="-1"]').hover()
@@ -144,7 +144,8 @@ async def test_jog_pad_in_chromium(browser: Any) -> None:
         # counted over the last 2 s, and the page has been open longer than that by now.
         rate = await page.evaluate("window.kvpStats.rate")
         assert rate >= 10.0, f"live updates at {rate:.1f} Hz"
-        assert await page.locator('.row[data-key="A1"] .val').text_content() == f"{a1_hidden:.2f}°"
+        shown = await page.locator('.row[data-key="A1"] .val').text_content()
+        assert abs(float(shown.rstrip("°")) - a1_hidden) < 0.011  # the view shows where A1 is
         await page.screenshot(path=str(SCREENSHOT))
         assert not errors, errors
         print(f"first state {first_state_ms:.0f} ms after navigation, live rate {rate:.1f} Hz")

@@ -35,6 +35,9 @@ from pyopenshowvar.kinematics import KR6R900SIXX
 
 TOKEN = "test-token-123"
 JOG = {"t": "jog", "press": 1, "frame": "axis", "key": "A1", "dir": 1, "ov": 100}
+#: Degrees within which an axis counts as standing still: a dynamic plant's encoders are noisy
+#: and its servos settle exponentially.
+STILL = 1e-3
 
 
 def jog_config(**kw: Any) -> EmulatorConfig:
@@ -85,7 +88,7 @@ async def settled(kvp: Client) -> float:
 
     await until(idle)
     a, b = np.zeros(6), np.ones(6)
-    while not np.array_equal(a, b):
+    while np.max(np.abs(a - b)) > STILL:
         a = await kvp.read_joint_angles()
         await asyncio.sleep(0.05)
         b = await kvp.read_joint_angles()
@@ -192,7 +195,7 @@ async def test_tool_increment_runs_in_the_tcp_frame(tmp_path: Any) -> None:
 
     start = fk_matrix(KR6R900SIXX, [0, -90, 90, 0, 30, 0])
     expected = start[:3, 3] + 10.0 * start[:3, 0]  # 10 mm along the flange's own x axis
-    assert np.allclose([pose.x, pose.y, pose.z], expected, atol=1e-3)
+    assert np.allclose([pose.x, pose.y, pose.z], expected, atol=0.01)
 
 
 # --- through the web server, like the page --------------------------------------------------
@@ -206,7 +209,7 @@ async def test_jog_moves_and_stops_on_release(rig: tuple[Emulator, WebServer]) -
         a1 = await settled(kvp)
         assert a1 > 0.5, "A1 did not move"
         await asyncio.sleep(0.1)
-        assert (await kvp.read_joint_angles())[0] == a1
+        assert (await kvp.read_joint_angles())[0] == pytest.approx(a1, abs=STILL)
         # The same press does not start again: its keep-alives after release are ignored
         await hold(ws, 0.1)
         assert await kvp.read("JOG_MODE") == "0"
@@ -264,8 +267,8 @@ async def test_cartesian_jogs_move_along_base_and_tool_axes(
         await settled(kvp)
         moved = await kvp.read_pose()
         assert moved.x - start.x > 5.0
-        assert abs(moved.y - start.y) < 1e-3 and abs(moved.z - start.z) < 1e-3
-        assert abs(moved.b - start.b) < 1e-3
+        assert abs(moved.y - start.y) < 0.05 and abs(moved.z - start.z) < 0.05
+        assert abs(moved.b - start.b) < 0.01
         from pyopenshowvar.kinematics import pose_to_matrix
 
         axes = pose_to_matrix([moved.x, moved.y, moved.z, moved.a, moved.b, moved.c])
@@ -275,7 +278,7 @@ async def test_cartesian_jogs_move_along_base_and_tool_axes(
         end = await kvp.read_pose()
         delta = np.array([end.x - moved.x, end.y - moved.y, end.z - moved.z])
         assert np.linalg.norm(delta) > 5.0
-        assert np.allclose(delta / np.linalg.norm(delta), axes[:3, 2], atol=1e-4)  # tool z
+        assert np.allclose(delta / np.linalg.norm(delta), axes[:3, 2], atol=1e-2)  # tool z
         await ws.close()
 
 
