@@ -127,18 +127,20 @@ async def ws_triggers(web: WebProcess, kvp: Client, n: int) -> dict[str, list[fl
 
 
 async def silent_pc(kvp: Client, port: int, n: int) -> list[float]:
-    """The PC stops topping up the credit: only the robot's own watchdog stops it."""
+    """The PC stops moving JOG_UNTIL on: only the robot's own watchdog stops it."""
     runs = []
     async with Client("127.0.0.1", port) as pc:
         for i in range(n):
             plan = plan_jog(JogRequest("axis", "A1", 1 if i % 2 else -1, None, 100.0), KR6R900SIXX)
-            await pc.write_many(plan.start_writes(5))
+            count = int(await pc.read("JOG_COUNT"))
+            await pc.write_many(plan.start_writes(count + 5))
             for _ in range(int(HOLD / 0.04)):
-                await pc.write("JOG_LEFT", "5")
+                count = int(await pc.read("JOG_COUNT"))
+                await pc.write("JOG_UNTIL", str(count + 5))
                 await asyncio.sleep(0.04)
 
-            async def trigger() -> None:
-                await pc.write("JOG_LEFT", "5")  # the last top-up, then silence
+            async def trigger() -> None:  # the last top-up, then silence
+                await pc.write("JOG_UNTIL", str(int(await pc.read("JOG_COUNT")) + 5))
 
             runs.append(await stop_latency(kvp, trigger))
             await pc.write_many(plan.stop_writes())
@@ -277,7 +279,9 @@ async def run(n: int, quick: bool, plant: str | None) -> tuple[list[Row], dict[s
         stop_row("a silent page", ws["silent page"], None, "includes the 100 ms keep-alive timeout")
     )
     rows.append(
-        stop_row("a silent PC", pc, None, "the KRL program's credit runs out (5 increments)")
+        stop_row(
+            "a silent PC", pc, None, "KVP_JOG plans at most 5 increments past the last JOG_UNTIL"
+        )
     )
     extra: dict[str, Any] = {"plant": plant or "default", "repeat": n}
     if browser is not None:

@@ -76,7 +76,7 @@ def test_krl_dir_writes_the_program_and_its_globals(tmp_path: Path) -> None:
     assert result.exit_code == 0, result.output
     src = (tmp_path / "kvp_jog.src").read_text()
     dat = (tmp_path / "kvp_jog_config.dat").read_text()
-    assert "DEF KVP_JOG()" in src and "DECL INT JOG_LEFT=0" in dat
+    assert "DEF KVP_JOG()" in src and "DECL INT JOG_UNTIL=0" in dat
 
 
 @pytest.mark.parametrize(

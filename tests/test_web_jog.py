@@ -120,8 +120,10 @@ def test_plan_keeps_cadence_and_limits(
         if acc >= 5 and step is None:
             t = np.sqrt(abs(inc[index]) / (a_max * acc / 100))
             assert abs(t - CADENCE) < 0.1 * CADENCE
-    writes = plan.start_writes(5)
-    assert writes[-1][0] == "JOG_MODE" and writes[-2][0] == "JOG_LEFT"
+    writes = plan.start_writes(plan.until(100, 100, 5))
+    assert writes[-1] == ("JOG_MODE", str(plan.mode)) and writes[-2][0] == "JOG_UNTIL"
+    # never more than the credit ahead of the count, and never past the end of a step
+    assert plan.until(100, 103, 5) == (108 if step is None else min(108, 100 + plan.count))
     assert plan.stop_writes()[0][0] == plan.target  # the increment is zeroed first
 
 
@@ -148,15 +150,18 @@ def test_bad_requests_are_refused(kw: dict[str, Any], error: str) -> None:
 
 # --- the KRL program on the emulator --------------------------------------------------------
 async def test_krl_stop_bound_in_simulated_time() -> None:
-    """After the PC zeroes the increment the robot moves for at most 3 cadences + 1 IPO."""
+    """After the PC zeroes the increment the robot moves for at most 3 cadences + 1 IPO; and
+    when the PC falls silent it plans nothing past JOG_UNTIL (the robot's own watchdog)."""
     async with Emulator(jog_config()) as emu, Client("127.0.0.1", emu.port) as kvp:
         robot = emu.robot
         assert robot is not None
         plan = plan_jog(JogRequest("axis", "A1", 1, None, 100.0), KR6R900SIXX)
-        await asyncio.sleep(0.1)  # KVP_JOG clears JOG_MODE/JOG_LEFT when it starts
-        await kvp.write_many(plan.start_writes(5))
+        await asyncio.sleep(0.1)  # KVP_JOG voids any left-over JOG_UNTIL when it starts
+        count = int(await kvp.read("JOG_COUNT"))
+        await kvp.write_many(plan.start_writes(count + 5))
         for _ in range(15):
-            await kvp.write("JOG_LEFT", "5")
+            count = int(await kvp.read("JOG_COUNT"))
+            await kvp.write("JOG_UNTIL", str(count + 5))
             await asyncio.sleep(0.04)
         robot.kernel.trace = []
         await kvp.write_many(plan.stop_writes())
@@ -165,14 +170,15 @@ async def test_krl_stop_bound_in_simulated_time() -> None:
         moving = [t for t, _, qd in robot.kernel.trace if np.any(np.abs(qd) > 1e-9)]
         assert moving, "the robot was not moving when the stop was written"
         assert moving[-1] - t_zero <= 3 * CADENCE + robot.kernel.ipo + 1e-9
-        # ... and on its own when the PC stops topping up the credit (the robot's watchdog)
-        await kvp.write_many(plan.start_writes(5))
+        # ... and on its own when the PC stops moving JOG_UNTIL on (the robot's watchdog)
+        count = int(await kvp.read("JOG_COUNT"))
+        await kvp.write_many(plan.start_writes(count + 5))
         robot.kernel.trace = []
         t_silent = robot.time
         await asyncio.sleep(0.5)
         moving = [t for t, _, qd in robot.kernel.trace if np.any(np.abs(qd) > 1e-9)]
         assert moving and moving[-1] - t_silent <= (5 + 2) * CADENCE + 2 * robot.kernel.ipo
-        assert await kvp.read("JOG_LEFT") == "0"  # the credit is used up: it waits
+        assert await kvp.read("JOG_COUNT") == str(count + 5)  # exactly the 5 it was allowed
 
 
 async def test_tool_increment_runs_in_the_tcp_frame(tmp_path: Any) -> None:
@@ -254,9 +260,12 @@ async def test_cartesian_jogs_move_along_base_and_tool_axes(
     async with Client("127.0.0.1", emu.port) as kvp:
         # Out of the wrist singularity of HOME (A5 = 0) first: a 10 degree A5 step.
         plan = plan_jog(JogRequest("axis", "A5", 1, 10.0, 100.0), KR6R900SIXX)
-        await kvp.write_many(plan.start_writes(5))
+        assert plan.count is not None
+        await asyncio.sleep(0.1)  # KVP_JOG voids any left-over JOG_UNTIL when it starts
+        start = int(await kvp.read("JOG_COUNT"))
+        await kvp.write_many(plan.start_writes(start + plan.count))
         async with asyncio.timeout(5):
-            while await kvp.read("JOG_LEFT") != "0" or emu.robot.kernel.moving:  # type: ignore[union-attr]  # noqa: ASYNC110
+            while await kvp.read("JOG_COUNT") != str(start + plan.count) or emu.robot.kernel.moving:  # type: ignore[union-attr]  # noqa: ASYNC110
                 await asyncio.sleep(0.02)
         await kvp.write_many(plan.stop_writes())
         await asyncio.sleep(0.1)  # the pad sees the new pose

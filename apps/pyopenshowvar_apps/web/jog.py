@@ -1,18 +1,20 @@
-"""Hold-to-move jogging: one owner at a time, a keep-alive from the page, credit for the robot.
+"""Hold-to-move jogging: one owner at a time, a keep-alive from the page, a limit for the robot.
 
 The page sends ``jog`` when a button goes down and repeats it as a keep-alive while the
 button is held (every 25 ms); it sends ``release`` when the button comes up, the pointer
-leaves, the window loses focus or the tab is hidden. :class:`JogController` turns that into
-writes on its own KVP connection:
+is cancelled, the window loses focus or the tab is hidden. :class:`JogController` turns that
+into KVP traffic on its own connection:
 
-* press: the increment and accelerations, then ``JOG_LEFT`` (credit) and ``JOG_MODE``;
-* while held: ``JOG_LEFT`` topped up to :data:`~.jogplan.CREDIT` every :data:`TOPUP` s, but
-  never past what the software limits (axes) or the reachable workspace (Cartesian) allow;
+* press: read ``JOG_COUNT``, then write the increment and accelerations, ``JOG_UNTIL`` (a few
+  increments ahead) and ``JOG_MODE``;
+* while held, every :data:`TOPUP` s: read ``JOG_COUNT`` and move ``JOG_UNTIL`` to
+  :data:`~.jogplan.CREDIT` increments ahead of it, but never past what the software limits
+  (axes) or the reachable workspace (Cartesian) allow, nor past the end of a step;
 * release, a dropped WebSocket, :data:`HOLD_TIMEOUT` without a keep-alive, or a failed write:
-  the increment zeroed first, then ``JOG_LEFT = 0`` and ``JOG_MODE = 0``, pipelined.
+  the increment zeroed first, then ``JOG_UNTIL = 0`` and ``JOG_MODE = 0``, pipelined.
 
-If the PC itself goes silent the robot still stops: the credit runs out after CREDIT
-increments (the KRL program's own watchdog, see ``krl/kvp_jog.src``).
+If the PC itself goes silent the robot still stops: it plans nothing past ``JOG_UNTIL`` (the
+KRL program's own watchdog, see ``krl/kvp_jog.src``).
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ log = logging.getLogger(__name__)
 #: The jog stops when the page has not repeated its keep-alive for this long (it sends one
 #: every 25 ms, so four in a row were lost or the page froze).
 HOLD_TIMEOUT = 0.1
-#: Seconds between credit top-ups while a continuous jog is held.
+#: Seconds between two moves of JOG_UNTIL while a jog is held.
 TOPUP = 0.04
 #: Increments that may already be planned or running beyond the PC's last view of the robot.
 IN_FLIGHT = 3
@@ -61,7 +63,8 @@ class _Jog:
     press: int
     req: JogRequest
     plan: JogPlan
-    started: float
+    #: JOG_COUNT when the press started.
+    start: int
     last_hold: float
     last_topup: float = 0.0
 
@@ -139,14 +142,16 @@ class JogController:
             return reason
         plan = plan_jog(req, self.model)
         credit = self._credit(req, plan, whole=req.step is not None)
-        if credit <= 0:
+        if credit <= 0 or (plan.count is not None and credit < plan.count):
             self._done[owner] = press
             return self._limit_text(req)
         async with self._lock:
-            self.jog = _Jog(owner, press, req, plan, now, now, last_topup=now)
             try:
-                await self.client.write_many(plan.start_writes(min(credit, self.credit)))
-            except (KvpError, OSError) as exc:
+                start = int(await self.client.read("JOG_COUNT"))
+                self.jog = _Jog(owner, press, req, plan, start, now, last_topup=now)
+                until = plan.until(start, start, min(credit, self.credit))
+                await self.client.write_many(plan.start_writes(until))
+            except (KvpError, OSError, ValueError) as exc:
                 self.jog = None
                 self._done[owner] = press
                 await self._zero(plan)
@@ -178,8 +183,8 @@ class JogController:
         try:
             await self.client.write_many(plan.stop_writes())
         except (KvpError, OSError) as exc:
-            # The robot still stops: its credit runs out within CREDIT increments.
-            log.warning("jog stop write failed (%s); the robot's credit runs out instead", exc)
+            # The robot still stops: it plans nothing past the last JOG_UNTIL.
+            log.warning("jog stop write failed (%s); the robot stops at JOG_UNTIL instead", exc)
 
     async def _retune(self, jog: _Jog, req: JogRequest) -> None:
         plan = plan_jog(req, self.model)
@@ -187,7 +192,7 @@ class JogController:
             if self.jog is not jog:
                 return
             jog.req, jog.plan = req, plan
-            writes = plan.start_writes(self.credit)[:4]  # accelerations and increment
+            writes = plan.start_writes(0)[:4]  # accelerations and increment
             try:
                 await self.client.write_many(writes)
             except (KvpError, OSError) as exc:
@@ -195,7 +200,7 @@ class JogController:
 
     # --- the watchdog and the credit --------------------------------------------------------
     async def run(self, period: float = 0.01) -> None:
-        """Stop on a missing keep-alive, top up the credit, notice a finished step."""
+        """Stop on a missing keep-alive, move JOG_UNTIL on, notice a finished step."""
         while True:
             await asyncio.sleep(period)
             jog = self.jog
@@ -209,32 +214,39 @@ class JogController:
             if now - jog.last_topup < TOPUP:
                 continue
             jog.last_topup = now
-            if jog.req.step is not None:
-                await self._check_step(jog)
-            else:
-                await self._topup(jog)
+            await self._topup(jog)
 
     async def _topup(self, jog: _Jog) -> None:
+        """Move JOG_UNTIL ahead of the program's count (or end a finished step)."""
         if not self.link.connected:
             await self.stop(jog.owner, "the live state of the robot is lost")
             return
-        credit = min(self.credit, self._credit(jog.req, jog.plan, whole=False))
+        try:
+            seen = int(await self.client.read("JOG_COUNT"))
+        except (KvpError, OSError, ValueError) as exc:
+            await self.stop(jog.owner, f"cannot read JOG_COUNT: {exc}")
+            return
+        plan = jog.plan
+        if plan.count is not None:
+            if seen - jog.start >= plan.count:
+                await self.stop(jog.owner, "step done")
+                return
+            credit = self.credit  # the whole step was checked against the limits at the press
+        else:
+            credit = min(self.credit, self._credit(jog.req, plan, whole=False))
         if credit <= 0:
             await self.stop(jog.owner, self._limit_text(jog.req))
             return
-        try:
-            await self.client.write("JOG_LEFT", str(credit))
-        except (KvpError, OSError) as exc:
-            await self.stop(jog.owner, f"credit write failed: {exc}")
-
-    async def _check_step(self, jog: _Jog) -> None:
-        try:
-            left = int(await self.client.read("JOG_LEFT"))
-        except (KvpError, OSError, ValueError) as exc:
-            await self.stop(jog.owner, f"cannot read JOG_LEFT: {exc}")
-            return
-        if left <= 0 and self.jog is jog:
-            await self.stop(jog.owner, "step done")
+        async with self._lock:
+            if self.jog is not jog:
+                return
+            try:
+                await self.client.write("JOG_UNTIL", str(plan.until(jog.start, seen, credit)))
+            except (KvpError, OSError) as exc:
+                self.jog = None
+                self._done[jog.owner] = jog.press
+                self.last_stop = (f"write failed: {exc}", time.monotonic())
+                await self._zero(plan)
 
     def _credit(self, req: JogRequest, plan: JogPlan, *, whole: bool) -> int:
         """Increments the robot may plan without passing a limit (``whole``: the full step)."""

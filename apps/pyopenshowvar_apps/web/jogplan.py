@@ -42,7 +42,7 @@ FloatArray = npt.NDArray[np.float64]
 #: Seconds one increment takes (two 12 ms IPO cycles: the advance run plans the next one in
 #: the cycle after an increment starts, well before it is needed).
 CADENCE = 0.024
-#: Increments the robot may still plan after the PC's last top-up: the robot's own watchdog.
+#: Increments the robot may plan beyond the count the PC last saw: the robot's own watchdog.
 #: 5 × 24 ms = 120 ms of motion if the PC (or the link to it) goes silent mid-jog.
 CREDIT = 5
 #: Jog speeds at 100 % jog override, deg/s. Each stays under ``max_accel · CADENCE`` of the
@@ -112,23 +112,31 @@ class JogPlan:
     #: Jog speed (deg/s or mm/s).
     speed: float
 
-    def start_writes(self, credit: int) -> list[tuple[str, str]]:
-        """Everything a press writes; ``JOG_MODE`` last so the program sees a whole command."""
+    def start_writes(self, until: int) -> list[tuple[str, str]]:
+        """Everything a press writes (``until``: the first JOG_UNTIL); ``JOG_MODE`` last, so
+        the program sees a whole command."""
         acc, acc_cp, acc_ori = self.acc
-        left = self.count if self.count is not None else credit
         return [
             ("JOG_ACC", str(acc)),
             ("JOG_ACC_CP", _num(acc_cp)),
             ("JOG_ACC_ORI", _num(acc_ori)),
             (self.target, self.literal),
-            ("JOG_LEFT", str(left)),
+            ("JOG_UNTIL", str(until)),
             ("JOG_MODE", str(self.mode)),
         ]
 
     def stop_writes(self) -> list[tuple[str, str]]:
         """Zero the increment first: the motion the program plans next reads it."""
-        return [(self.target, _literal(self.target, np.zeros(6))), ("JOG_LEFT", "0"),
+        return [(self.target, _literal(self.target, np.zeros(6))), ("JOG_UNTIL", "0"),
                 ("JOG_MODE", "0")]  # fmt: skip
+
+    def until(self, start: int, seen: int, credit: int) -> int:
+        """JOG_UNTIL once JOG_COUNT reads ``seen`` (it read ``start`` at the press): ``credit``
+        more increments, and in step mode never past the step."""
+        limit = seen + credit
+        if self.count is not None:
+            limit = min(limit, start + self.count)
+        return limit
 
 
 def _num(x: float) -> str:

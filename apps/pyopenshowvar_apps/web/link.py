@@ -34,7 +34,7 @@ log = logging.getLogger(__name__)
 #: Read every period (those a controller lacks are dropped after the first try).
 FAST = (
     "$AXIS_ACT", "$POS_ACT", "$TORQUE_AXIS_ACT[]", "$OV_PRO", "$PRO_STATE1", "$PRO_NAME1[]",
-    "$MODE_OP", "$STOPMESS", "JOG_MODE", "JOG_LEFT", "$EMU_MESSAGE[]",
+    "$MODE_OP", "$STOPMESS", "JOG_MODE", "$EMU_MESSAGE[]",
 )  # fmt: skip
 #: Read about once a second: they change rarely.
 SLOW = ("$SOFTN_END[]", "$SOFTP_END[]", "$TOOL", "$BASE", "$ROBNAME[]")
@@ -208,7 +208,6 @@ class RobotLink:
                 "stopmess": self.values.get("$STOPMESS") is True,
                 "message": self.text("$EMU_MESSAGE[]"),
                 "jog_ready": self.jog_ready(),
-                "jog_left": self.values.get("JOG_LEFT"),
             },
             "arm": arm_frames(self.model, q, tool) if q is not None else None,
             "watch": watch,
