@@ -126,7 +126,8 @@ async def test_jog_pad_in_chromium(browser: Any) -> None:
         assert a1 > 0.5, "A1 did not move while the button was held"
         assert web.jog.last_stop is not None and web.jog.last_stop[0] == "released"
         await asyncio.sleep(0.2)
-        assert abs(float((await kvp.read_joint_angles())[0]) - a1) < 1e-3, "A1 moved after release"
+        # still (a dynamic plant's servo may creep a hundredth of a degree into place)
+        assert abs(float((await kvp.read_joint_angles())[0]) - a1) < 0.02, "A1 moved after release"
 
         # Hiding the tab while a button is held stops the jog too.
         await page.locator('.jog[data-key="A1"][data-dir="-1"]').hover()
@@ -145,7 +146,7 @@ async def test_jog_pad_in_chromium(browser: Any) -> None:
         rate = await page.evaluate("window.kvpStats.rate")
         assert rate >= 10.0, f"live updates at {rate:.1f} Hz"
         shown = await page.locator('.row[data-key="A1"] .val').text_content()
-        assert abs(float(shown.rstrip("°")) - a1_hidden) < 0.011  # the view shows where A1 is
+        assert abs(float(shown.rstrip("°")) - a1_hidden) < 0.03  # the view shows where A1 is
         await page.screenshot(path=str(SCREENSHOT))
         assert not errors, errors
         print(f"first state {first_state_ms:.0f} ms after navigation, live rate {rate:.1f} Hz")

@@ -36,8 +36,10 @@ from pyopenshowvar.kinematics import KR6R900SIXX
 TOKEN = "test-token-123"
 JOG = {"t": "jog", "press": 1, "frame": "axis", "key": "A1", "dir": 1, "ov": 100}
 #: Degrees within which an axis counts as standing still: a dynamic plant's encoders are noisy
-#: and its servos settle exponentially.
+#: and its servos' integral action creeps the last hundredths of a degree in slowly.
 STILL = 1e-3
+#: What a stopped axis may still creep afterwards (deg) under a dynamic plant.
+CREEP = 0.02
 
 
 def jog_config(**kw: Any) -> EmulatorConfig:
@@ -196,7 +198,10 @@ async def test_tool_increment_runs_in_the_tcp_frame(tmp_path: Any) -> None:
                 return await kvp.read("DONE") == "TRUE" and not emu.robot.kernel.moving  # type: ignore[union-attr]
 
             await until(done)
-            pose = await kvp.read_pose()
+            before, pose = None, await kvp.read_pose()
+            while before is None or abs(pose.x - before.x) + abs(pose.z - before.z) > 1e-3:
+                await asyncio.sleep(0.05)  # a dynamic plant's servos settle after the set-point
+                before, pose = pose, await kvp.read_pose()
     from pyopenshowvar.kinematics import fk_matrix
 
     start = fk_matrix(KR6R900SIXX, [0, -90, 90, 0, 30, 0])
@@ -215,7 +220,7 @@ async def test_jog_moves_and_stops_on_release(rig: tuple[Emulator, WebServer]) -
         a1 = await settled(kvp)
         assert a1 > 0.5, "A1 did not move"
         await asyncio.sleep(0.1)
-        assert (await kvp.read_joint_angles())[0] == pytest.approx(a1, abs=STILL)
+        assert (await kvp.read_joint_angles())[0] == pytest.approx(a1, abs=CREEP)
         # The same press does not start again: its keep-alives after release are ignored
         await hold(ws, 0.1)
         assert await kvp.read("JOG_MODE") == "0"
@@ -227,12 +232,14 @@ async def test_dropped_connection_and_silent_page_stop_the_jog(
 ) -> None:
     emu, web = rig
     async with Client("127.0.0.1", emu.port) as kvp:
+        web.jog.hold_timeout = 5.0  # only the drop itself may stop this jog (a loaded machine)
         ws = await page(web)
         await hold(ws, 0.3)
         ws.transport.abort()  # the TCP connection drops without a closing handshake
         a1 = await settled(kvp)
         assert a1 > 0.1 and web.jog.last_stop is not None
         assert "lost" in web.jog.last_stop[0]
+        web.jog.hold_timeout = 0.1
         ws = await page(web)  # a page that freezes: no release, no keep-alive
         await ws.send(json.dumps({**JOG, "press": 2}))
         await settled(kvp)
@@ -277,7 +284,7 @@ async def test_cartesian_jogs_move_along_base_and_tool_axes(
         moved = await kvp.read_pose()
         assert moved.x - start.x > 5.0
         assert abs(moved.y - start.y) < 0.05 and abs(moved.z - start.z) < 0.05
-        assert abs(moved.b - start.b) < 0.01
+        assert abs(moved.b - start.b) < CREEP
         from pyopenshowvar.kinematics import pose_to_matrix
 
         axes = pose_to_matrix([moved.x, moved.y, moved.z, moved.a, moved.b, moved.c])
