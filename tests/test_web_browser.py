@@ -100,6 +100,9 @@ async def test_jog_pad_in_chromium(browser: Any) -> None:
         WebServer("127.0.0.1", emu.port, token=TOKEN, emulated=True) as web,
         Client("127.0.0.1", emu.port) as kvp,
     ):
+        # The page's own stops (button up, tab hidden) are under test here, not the server's
+        # keep-alive timeout (tests/test_web_jog.py), which a stalled loop could trigger first.
+        web.jog.hold_timeout = 5.0
         page = await browser.new_page()
         errors: list[str] = []
         page.on("pageerror", lambda exc: errors.append(str(exc)))
