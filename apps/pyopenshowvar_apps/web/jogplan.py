@@ -39,16 +39,17 @@ __all__ = [
 Frame = Literal["axis", "base", "tool"]
 FloatArray = npt.NDArray[np.float64]
 
-#: Seconds one increment takes (two 12 ms IPO cycles: the advance run plans the next one in
-#: the cycle after an increment starts, well before it is needed).
-CADENCE = 0.024
+#: Seconds from the start of one increment to the start of the next (its profile takes twice
+#: that). The advance run plans the next increment in the IPO cycle (12 ms) after one starts,
+#: before it is needed; a release leaves at most about 3 cadences of motion (60 ms).
+CADENCE = 0.020
 #: Increments the robot may plan beyond the count the PC last saw: the robot's own watchdog.
-#: 5 × 24 ms = 120 ms of motion if the PC (or the link to it) goes silent mid-jog.
+#: 5 × 20 ms = 100 ms of motion if the PC (or the link to it) goes silent mid-jog.
 CREDIT = 5
 #: Jog speeds at 100 % jog override, deg/s. Each stays under ``max_accel · CADENCE`` of the
-#: KR 6 R900 sixx (A2: 395 deg/s² · 24 ms = 9.5 deg/s) and under about 250 mm/s at the flange
+#: KR 6 R900 sixx (A2: 395 deg/s² · 20 ms = 7.9 deg/s) and under about 250 mm/s at the flange
 #: when the arm is stretched (the T1 speed limit).
-AXIS_SPEED = (15.0, 9.0, 15.0, 30.0, 30.0, 45.0)
+AXIS_SPEED = (15.0, 7.5, 15.0, 30.0, 30.0, 45.0)
 #: Cartesian jog speeds at 100 %: mm/s for X/Y/Z, deg/s for A/B/C.
 CART_SPEED = (100.0, 30.0)
 #: Step-mode increments offered by the page: degrees for axes, mm (deg for A/B/C) otherwise.
