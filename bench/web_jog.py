@@ -40,6 +40,7 @@ from _common import ROOT, EmuProcess, Row, base_parser, machine_info, median, pr
 from pyopenshowvar_apps.web.jogplan import JogRequest, plan_jog
 from pyopenshowvar_apps.web.runner import KRL_DIR
 
+from kukavarproxy_emu import Emulator, EmulatorConfig
 from pyopenshowvar import Client
 from pyopenshowvar.kinematics import KR6R900SIXX
 
@@ -205,6 +206,61 @@ async def browser_figures(web: WebProcess, kvp: Client, n: int) -> dict[str, Any
     return out
 
 
+async def sim_stops(n: int, plant: str | None) -> list[float]:
+    """The robot's side alone, in the emulator's simulated time (no load can change it): ms
+    from the moment the zero increment is in the controller's variables to the first cycle
+    from which the published $AXIS_ACT stays within STILL of its rest position."""
+    extra: dict[str, Any] = {"plant": plant} if plant is not None else {}
+    config = EmulatorConfig(
+        port=0,
+        program=str(KRL_DIR / "kvp_jog.src"),
+        config_files=(KRL_DIR / "kvp_jog_config.dat",),
+        **extra,
+    )
+    runs: list[float] = []
+    async with Emulator(config) as emu, Client("127.0.0.1", emu.port) as pc:
+        robot = emu.robot
+        assert robot is not None
+        samples: list[tuple[float, float]] = []
+        zero_at: list[float] = []
+        tick = robot.clock.callback
+
+        def sampled_tick() -> None:  # every cycle's published $AXIS_ACT, none missed
+            if not zero_at and emu.store.get("JOG_AX")["A1"] == 0.0:  # type: ignore[index]
+                zero_at.append(robot.time)  # the write landed since the previous cycle
+            tick()
+            value = emu.store.get("$AXIS_ACT")
+            samples.append((robot.time, float(value["A1"])))  # type: ignore[index]
+
+        robot.clock.callback = sampled_tick
+        await asyncio.sleep(0.1)
+        for i in range(n):
+            plan = plan_jog(JogRequest("axis", "A1", 1 if i % 2 else -1, None, 100.0), KR6R900SIXX)
+            # A limit far ahead: a stalled loop must not end the jog before the stop is timed.
+            count = int(await pc.read("JOG_COUNT"))
+            await pc.write_many(plan.start_writes(count + 10_000))
+            await asyncio.sleep(HOLD + 0.007 * i)  # vary the phase of the stop
+            samples.clear()
+            await asyncio.sleep(0.05)
+            zero_at.clear()
+            await pc.write(plan.target, plan.stop_writes()[0][1])
+            await asyncio.sleep(0.4 / robot.clock.speed)  # 0.4 s of simulated time, or more
+            await pc.write_many(plan.stop_writes())
+            t_zero = zero_at[0]
+            before = [a for t, a in samples if t <= t_zero + 1e-9]
+            if (
+                len(before) < 2
+                or abs(before[-1] - before[-2]) < 0.9 * plan.speed * robot.kernel.ipo
+            ):
+                runs.append(math.nan)  # not cruising when the stop landed: not this measurement
+                continue
+            final = samples[-1][1]
+            moving = [t for t, a in samples if abs(a - final) > STILL]
+            # the first cycle that reads still is one IPO after the last one that moved
+            runs.append(((moving[-1] + robot.kernel.ipo) - t_zero) * 1e3 if moving else 0.0)
+    return runs
+
+
 class WebProcess:
     """``kvp --port PORT web --http-port 0`` in a subprocess (the PC, on its own core)."""
 
@@ -261,6 +317,7 @@ async def run(n: int, quick: bool, plant: str | None) -> tuple[list[Row], dict[s
                 browser = None if quick else await browser_figures(web, kvp, n)
         finally:
             web.close()
+    sim = await sim_stops(n if not quick else 2, plant)
 
     def stop_row(name: str, runs: list[float], target: float | None, note: str = "") -> Row:
         runs = [r for r in runs if not math.isnan(r)]
@@ -273,6 +330,14 @@ async def run(n: int, quick: bool, plant: str | None) -> tuple[list[Row], dict[s
             runs=runs,
         )
 
+    rows.append(
+        stop_row(
+            "the zero increment, in simulated time",
+            sim,
+            100.0,
+            "the robot's side alone (KVP_JOG + motion + plant), unaffected by the machine's load",
+        )
+    )
     rows.append(stop_row("release", ws["release"], 100.0))
     rows.append(stop_row("a dropped connection", ws["dropped connection"], 100.0))
     rows.append(
