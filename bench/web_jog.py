@@ -321,6 +321,8 @@ async def run(n: int, quick: bool, plant: str | None) -> tuple[list[Row], dict[s
 
     def stop_row(name: str, runs: list[float], target: float | None, note: str = "") -> Row:
         runs = [r for r in runs if not math.isnan(r)]
+        if not runs:  # every try was void (the jog never ran): say so, do not fail
+            return Row(f"jog stop latency after {name}", math.nan, "ms", note="no valid run")
         return Row(
             f"jog stop latency after {name} (median; max {max(runs):.0f} ms)",
             median(runs),
