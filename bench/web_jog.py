@@ -130,7 +130,7 @@ async def ws_triggers(web: WebProcess, kvp: Client, n: int) -> dict[str, list[fl
 async def silent_pc(kvp: Client, port: int, n: int) -> list[float]:
     """The PC stops moving JOG_UNTIL on: only the robot's own watchdog stops it."""
     runs = []
-    async with Client("127.0.0.1", port) as pc:
+    async with Client("127.0.0.1", port, timeout=10.0) as pc:  # a loaded machine stalls
         for i in range(n):
             plan = plan_jog(JogRequest("axis", "A1", 1 if i % 2 else -1, None, 100.0), KR6R900SIXX)
             count = int(await pc.read("JOG_COUNT"))
@@ -310,7 +310,7 @@ async def run(n: int, quick: bool, plant: str | None) -> tuple[list[Row], dict[s
     with EmuProcess(*args) as emu:
         web = WebProcess(emu.port)
         try:
-            async with Client("127.0.0.1", emu.port) as kvp:
+            async with Client("127.0.0.1", emu.port, timeout=10.0) as kvp:
                 await jog_ready(kvp, web)
                 ws = await ws_triggers(web, kvp, n)
                 pc = await silent_pc(kvp, emu.port, n)
