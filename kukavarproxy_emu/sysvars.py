@@ -116,6 +116,8 @@ SYSTEM_VARIABLES: tuple[SysVar, ...] = (
     # $ALARM_STOP is active-low: TRUE means the emergency-stop circuit is closed (no alarm).
     SysVar("$ALARM_STOP", "BOOL", init="TRUE"),
     SysVar("$POWER_FAIL", "BOOL", init="FALSE"),
+    # Operator safety (the safety gate): TRUE = closed; open in #AUT/#EX stops the robot.
+    SysVar("$USER_SAF", "BOOL", init="TRUE"),
     # Inputs come from the field bus and outputs from the robot/SPS program: neither can be
     # written through KUKAVARPROXY (JOpenShowVar's documentation; copy a global in the SPS).
     SysVar("$IN", "BOOL", (4096,), init="FALSE"),

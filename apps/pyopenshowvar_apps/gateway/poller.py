@@ -1,0 +1,358 @@
+"""One task per robot: connect, read everything in one pipelined batch per poll, publish.
+
+Each poll is ONE :meth:`Client.read_many` of :data:`~.mapping.POLL_VARIABLES`, the cell file's
+extra variables and its snapshot groups (a snapshot group is one read of a STRUC the
+controller fills, fanned out to its member variables). Only texts that changed since the last
+poll are parsed, and only node values that changed are written, so a robot at rest costs the
+event loop almost nothing beyond the KVP round trip. Every value written carries the time the
+reply arrived as its SourceTimestamp.
+
+A robot that drops (connection lost, timeout, refused connection) turns all its live nodes
+Bad (BadNoCommunication, the value null, as OPC 10000-4 §7.7.1 asks) and ``Connected`` FALSE;
+the task retries with a capped backoff and the nodes turn Good with the first poll after it
+reconnects. The poll schedule is absolute (missed periods are skipped, never bunched).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import random
+import time
+from collections.abc import Mapping, Sequence
+from datetime import UTC, datetime
+from typing import Any
+
+from asyncua import Server, ua
+
+from pyopenshowvar import Client, KrlEnum, KvpError, Struct, UnknownVariableError, parse_value
+from pyopenshowvar.errors import KrlValueError
+
+from .cell import RobotConfig, SnapshotGroup, canonical
+from .mapping import IDENTITY_VARIABLES, POLL_VARIABLES, identity_values, poll_values
+from .robotics import UNITS, CellNodes, RobotNodes
+
+__all__ = ["RobotPoller", "Sink"]
+
+log = logging.getLogger(__name__)
+
+_GOOD = ua.StatusCode(ua.StatusCodes.Good)
+BACKOFF_MIN, BACKOFF_MAX = 0.25, 2.0
+_V = ua.VariantType
+
+
+class Sink:
+    """Writes node values into the address space when the value or its status changed."""
+
+    def __init__(self, server: Server) -> None:
+        self.server = server
+        self._last: dict[ua.NodeId, Any] = {}
+        self._typed: set[ua.NodeId] = set()
+        self.writes = 0
+
+    async def set(self, node: ua.NodeId, value: Any, vtype: ua.VariantType, ts: datetime) -> None:
+        if self._last.get(node, _MISSING) == value:
+            return
+        self._last[node] = value
+        self.writes += 1
+        dv = ua.DataValue(ua.Variant(value, vtype), SourceTimestamp=ts, ServerTimestamp=ts)
+        await self.server.write_attribute_value(node, dv)
+
+    async def set_typed(
+        self, node: ua.NodeId, value: Any, vtype: ua.VariantType, ts: datetime
+    ) -> None:
+        """For a BaseDataType node: fix its DataType to ``vtype`` the first time, then set."""
+        if node not in self._typed:
+            self._typed.add(node)
+            dt = ua.DataValue(ua.Variant(ua.NodeId(vtype.value), ua.VariantType.NodeId))
+            await self.server.write_attribute_value(node, dt, ua.AttributeIds.DataType)
+        await self.set(node, value, vtype, ts)
+
+    async def bad(self, node: ua.NodeId, code: int, ts: datetime) -> None:
+        marker = ("bad", code)
+        if self._last.get(node, _MISSING) == marker:
+            return
+        self._last[node] = marker
+        dv = ua.DataValue(StatusCode=ua.StatusCode(code), SourceTimestamp=ts, ServerTimestamp=ts)
+        await self.server.write_attribute_value(node, dv)
+
+
+_MISSING = object()
+
+
+class RobotPoller:
+    """Polls one robot over KVP and keeps its nodes current (see the module doc)."""
+
+    def __init__(
+        self,
+        cfg: RobotConfig,
+        nodes: RobotNodes,
+        cell: CellNodes,
+        sink: Sink,
+        max_speed: Sequence[float],
+    ) -> None:
+        self.cfg, self.nodes, self.cell, self.sink = cfg, nodes, cell, sink
+        self.max_speed = tuple(max_speed)
+        self.client: Client | None = None
+        self.connected = False
+        self.polls = 0
+        self.last_error = ""
+        self._texts: dict[str, str] = {}
+        self._values: dict[str, Any] = {}
+        self._states: dict[str, str] = {}
+        self._snap_members = {canonical(m) for s in cfg.snapshots for m in s.members}
+        # snapshot members are stored under the name the poll would have used
+        self._alias = {canonical(n): n for n in (*POLL_VARIABLES, *cfg.exposed)}
+        self._stop = asyncio.Event()
+
+    # ------------------------------------------------------------------ lifecycle
+
+    async def run(self) -> None:
+        """Poll until :meth:`stop`; reconnects on its own after any connection problem."""
+        backoff = BACKOFF_MIN
+        await self._mark_bad(ua.StatusCodes.BadWaitingForInitialData)
+        while not self._stop.is_set():
+            try:
+                await self._session()
+                backoff = BACKOFF_MIN
+            except (KvpError, OSError, TimeoutError) as exc:
+                if self.connected or not self.last_error:
+                    log.warning("robot %s (%s:%d): %s", self.cfg.name, self.cfg.host, self.cfg.port, exc)
+                self.last_error = str(exc) or type(exc).__name__
+            finally:
+                await self._disconnect()
+            if self._stop.is_set():
+                break
+            # jitter keeps 50 robots behind one switch from reconnecting in lockstep
+            delay = backoff * (0.8 + 0.4 * random.random())
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._stop.wait(), delay)
+            backoff = min(backoff * 2, BACKOFF_MAX)
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    async def _disconnect(self) -> None:
+        was = self.connected
+        self.connected = False
+        client, self.client = self.client, None
+        if client is not None:
+            with contextlib.suppress(Exception):
+                await client.close()
+        if was or self.polls == 0:
+            await self._mark_bad(ua.StatusCodes.BadNoCommunication)
+
+    async def _session(self) -> None:
+        cfg = self.cfg
+        client = Client(cfg.host, cfg.port, timeout=cfg.timeout, connect_timeout=cfg.timeout, keepalive=None)
+        self.client = client
+        await client.connect()
+        names = await self._identity(client)
+        self.connected = True
+        self.last_error = ""
+        log.info("robot %s connected (%s:%d)", cfg.name, cfg.host, cfg.port)
+        period = 1.0 / cfg.poll_hz
+        due = time.monotonic()
+        while not self._stop.is_set():
+            results = await client.read_many(names, timeout=cfg.timeout)
+            stamp = datetime.now(UTC)
+            names = await self._apply(results, names, stamp)
+            self.polls += 1
+            due += period
+            now = time.monotonic()
+            if due < now:  # late: skip the missed periods instead of bunching polls
+                due = now + period - (now - due) % period
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._stop.wait(), due - now)
+
+    # ------------------------------------------------------------------ reads
+
+    def poll_names(self) -> list[str]:
+        """What one poll asks for: snapshot STRUCs, then the variables they do not cover."""
+        names = [s.variable for s in self.cfg.snapshots]
+        for name in (*POLL_VARIABLES, *self.cfg.exposed):
+            if canonical(name) not in self._snap_members and name not in names:
+                names.append(name)
+        return names
+
+    async def _identity(self, client: Client) -> list[str]:
+        results = await client.read_many(IDENTITY_VARIABLES, timeout=self.cfg.timeout)
+        values = {n: _parse(r.text) for n, r in results.items() if r.ok}
+        ident = identity_values(values)
+        stamp = datetime.now(UTC)
+        strings = {
+            "product_code": ident["product_code"], "serial": ident["serial"],
+            "software_revision": ident["software_revision"], "controller_product_code": "",
+            "controller_serial": "", "motor_product_code": "", "motor_serial": "", "user_level": "",
+        }  # fmt: skip
+        texts = {
+            "manufacturer": "KUKA", "model": ident["model"], "name": ident["name"] or self.cfg.name,
+            "controller_manufacturer": "KUKA", "controller_model": "KUKA Robot Controller (KRC)",
+            "motor_manufacturer": "KUKA", "motor_model": "",
+            "software_manufacturer": "KUKA", "software_model": "KUKA System Software",
+        }  # fmt: skip
+        for key, value in strings.items():
+            for node in self.nodes.identity.get(key, []):
+                await self.sink.set(node, value, _V.String, stamp)
+        for key, value in texts.items():
+            for node in self.nodes.identity.get(key, []):
+                await self.sink.set(node, ua.LocalizedText(value), _V.LocalizedText, stamp)
+        await self._static(stamp)
+        return self.poll_names()
+
+    async def _static(self, stamp: datetime) -> None:
+        """Values fixed by the model: category, motion profiles, units, task names."""
+        n, s = self.nodes, self.sink
+        for node in n.identity.get("category", []):
+            await s.set(node, 1, _V.Int32, stamp)  # ARTICULATED_ROBOT
+        for node in n.identity.get("motion_profile", []):
+            await s.set(node, 1, _V.Int32, stamp)  # ROTARY
+        tasks = self.nodes.tasks
+        if n.identity.get("task_reference") and "robot" in tasks:
+            robot_task = tasks["robot"].program_name
+            tc = ua.NodeId(robot_task.Identifier.rsplit(".ParameterSet.", 1)[0], robot_task.NamespaceIndex)
+            await s.set(n.identity["task_reference"][0], tc, _V.NodeId, stamp)
+        for key, label in (("robot_task_name", "Robot interpreter ($PRO_STATE1)"),
+                           ("submit_task_name", "Submit interpreter ($PRO_STATE0)")):  # fmt: skip
+            for node in n.identity.get(key, []):
+                await s.set(node, ua.LocalizedText(label), _V.LocalizedText, stamp)
+        for key, label in (("estop_fn_name", "$ALARM_STOP"), ("opsafe_fn_name", "$USER_SAF"),
+                           ("stopmess_fn_name", "$STOPMESS")):  # fmt: skip
+            for node in n.identity.get(key, []):
+                await s.set(node, label, _V.String, stamp)
+        for unit, nodes in (("deg", n.position), ("deg/s", n.speed), ("Nm", n.torque),
+                            ("%", n.current), ("degC", n.temperature)):  # fmt: skip
+            for node in nodes:
+                eu = ua.NodeId(f"{node.Identifier}.EngineeringUnits", node.NamespaceIndex)
+                await s.set(eu, UNITS[unit], _V.ExtensionObject, stamp)
+
+    async def _apply(
+        self, results: Mapping[str, Any], names: list[str], stamp: datetime
+    ) -> list[str]:
+        changed = False
+        keep = names
+        for name, r in results.items():
+            if r.error is not None:
+                if isinstance(r.error, UnknownVariableError):
+                    # not on this controller: stop asking until the next connection
+                    keep = [n for n in keep if n != name]
+                    log.info("robot %s: %s is unknown on the controller", self.cfg.name, name)
+                    group = self._snapshot(name)
+                    if group is not None:  # not installed: read its variables one by one
+                        keep += [self._alias.get(canonical(m), m) for m in group.members]
+                    await self._missing(name, stamp)
+                    continue
+                raise r.error
+            if self._texts.get(name) == r.text:
+                continue
+            self._texts[name] = r.text
+            value = _parse(r.text)
+            snapshot = self._snapshot(name)
+            if snapshot is not None:
+                self._fan_out(snapshot, value)
+            else:
+                self._values[name] = value
+            changed = True
+        if changed:
+            await self._publish(stamp)
+        if self.nodes.connected is not None:
+            await self.sink.set(self.nodes.connected, True, _V.Boolean, stamp)
+        return keep
+
+    def _snapshot(self, name: str) -> SnapshotGroup | None:
+        return next((s for s in self.cfg.snapshots if s.variable == name), None)
+
+    def _fan_out(self, group: SnapshotGroup, value: Any) -> None:
+        if not isinstance(value, Struct):
+            log.warning("robot %s: snapshot %s is not a STRUC", self.cfg.name, group.variable)
+            return
+        members = {k.upper(): v for k, v in value.members.items()}
+        for original, member in group.members.items():
+            if member.upper() in members:
+                self._values[self._alias.get(canonical(original), original)] = members[member.upper()]
+
+    async def _missing(self, name: str, stamp: datetime) -> None:
+        node = self.nodes.extras.get(name)
+        if node is not None:
+            await self.sink.bad(node, ua.StatusCodes.BadNodeIdUnknown, stamp)
+
+    # ------------------------------------------------------------------ writes to nodes
+
+    async def _publish(self, stamp: datetime) -> None:
+        values = poll_values(self._values, self.max_speed)
+        n, s = self.nodes, self.sink
+        for key, nodes in (("position", n.position), ("speed", n.speed), ("torque", n.torque),
+                           ("current", n.current), ("temperature", n.temperature)):  # fmt: skip
+            if key in values:
+                for node, v in zip(nodes, values[key], strict=False):
+                    await s.set(node, v, _V.Double, stamp)
+        for key, vtype in (("override", _V.Double), ("in_control", _V.Boolean), ("mode", _V.Int32),
+                           ("estop", _V.Boolean), ("pstop", _V.Boolean),
+                           ("estop_fn_active", _V.Boolean), ("opsafe_fn_active", _V.Boolean),
+                           ("opsafe_fn_enabled", _V.Boolean), ("stopmess_fn_active", _V.Boolean),
+                           ("stopmess_fn_enabled", _V.Boolean)):  # fmt: skip
+            if key in values and key in n.scalars:
+                await s.set(n.scalars[key], values[key], vtype, stamp)
+        for key, task in n.tasks.items():
+            if f"{key}_program" in values:
+                await s.set(task.program_name, values[f"{key}_program"], _V.String, stamp)
+            if f"{key}_loaded" in values:
+                await s.set(task.program_loaded, values[f"{key}_loaded"], _V.Boolean, stamp)
+            if f"{key}_state" in values:
+                await self._task_state(key, values[f"{key}_state"], stamp)
+        for name, node in n.extras.items():
+            if name in self._values:
+                variant = _variant(self._values[name], self._texts.get(name, ""))
+                await s.set_typed(node, variant.Value, variant.VariantType, stamp)
+
+    async def _task_state(self, key: str, state: str, stamp: datetime) -> None:
+        task, s = self.nodes.tasks[key], self.sink
+        before = self._states.get(key)
+        self._states[key] = state
+        state_id = self.cell.states.get(state)
+        await s.set(task.current_state, ua.LocalizedText(state), _V.LocalizedText, stamp)
+        if state_id is not None:
+            await s.set(task.current_state_id, state_id[0], _V.NodeId, stamp)
+        transition = self.cell.transitions.get(f"{before}To{state}") if before else None
+        if transition is not None and before != state:
+            await s.set(task.last_transition, ua.LocalizedText(f"{before}To{state}"), _V.LocalizedText, stamp)
+            await s.set(task.last_transition_id, transition[0], _V.NodeId, stamp)
+
+    async def _mark_bad(self, code: int) -> None:
+        stamp = datetime.now(UTC)
+        n = self.nodes
+        live: list[ua.NodeId] = [*n.position, *n.speed, *n.torque, *n.current, *n.temperature]
+        live += [node for key, node in n.scalars.items()]
+        for task in n.tasks.values():
+            live += [task.program_name, task.program_loaded, task.current_state]
+        live += list(n.extras.values())
+        for node in live:
+            await self.sink.bad(node, code, stamp)
+        if n.connected is not None:
+            await self.sink.set(n.connected, False, _V.Boolean, stamp)
+        # parse everything again after a reconnect: the controller may have changed meanwhile
+        self._texts.clear()
+        self._values.clear()
+
+
+def _parse(text: str) -> Any:
+    try:
+        return parse_value(text)
+    except (KrlValueError, ValueError):
+        return text
+
+
+def _variant(value: Any, text: str) -> ua.Variant:
+    """An extra variable's value: scalars typed, anything else as its KRL text."""
+    if isinstance(value, bool):
+        return ua.Variant(value, _V.Boolean)
+    if isinstance(value, int):
+        return ua.Variant(value, _V.Int32)
+    if isinstance(value, float):
+        return ua.Variant(value, _V.Double)
+    if isinstance(value, KrlEnum):
+        return ua.Variant(str(value), _V.String)
+    if isinstance(value, str):
+        return ua.Variant(value, _V.String)
+    return ua.Variant(text, _V.String)

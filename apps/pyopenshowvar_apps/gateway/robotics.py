@@ -1,0 +1,356 @@
+"""The cell's node tree in the OPC UA for Robotics model (OPC 40010-1, NodeSet 1.02).
+
+::
+
+    Objects/DeviceSet/<cell> : MotionDeviceSystemType
+      MotionDevices/<robot> : MotionDeviceType      Manufacturer, Model, SerialNumber, ...
+        Axes/A1..A6 : AxisType                       ParameterSet/ActualPosition, ActualSpeed
+        PowerTrains/PowerTrain1..6 : PowerTrainType  Motor1 : MotorType (MotorTemperature,
+                                                     + ActualTorque, ActualCurrent: ours)
+        ParameterSet/SpeedOverride, InControl
+      Controllers/<robot> : ControllerType           Software/KSS, CurrentUser,
+        TaskControls/RobotInterpreter, SubmitInterpreter : TaskControlType (+ state machine)
+        ParameterSet/<extra variables>, Connected (ours); WriteVariable method (ours)
+      SafetyStates/<robot> : SafetyStateType          OperationalMode, EmergencyStop,
+                                                     ProtectiveStop and their functions
+
+The references the specification defines between them are added too: the controller
+``Controls`` its motion device and ``HasSafetyStates`` its safety state; each power train
+``Moves`` its axis and the axis ``Requires`` it (one motor per axis: a KUKA wrist's mechanical
+coupling is not modelled). NodeIds of the specification's types are its normative numeric ids;
+:func:`check_type_ids` verifies them against the loaded NodeSet at start-up.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from asyncua import Server, ua
+
+from .model import DI_URI, GATEWAY_URI, ROBOTICS_URI, Instantiator, NodeBatch
+
+__all__ = ["AXES", "CellNodes", "RobotNodes", "TaskNodes", "build_cell", "check_type_ids"]
+
+AXES = ("A1", "A2", "A3", "A4", "A5", "A6")
+
+# Normative NodeIds (OPC 40010-1 NodeSet 1.02, DI 1.05) with the browse name each must have.
+ROBOTICS_IDS = {
+    "MotionDeviceSystemType": 1002,
+    "ControllerType": 1003,
+    "MotionDeviceType": 1004,
+    "TaskControlType": 1011,
+    "SafetyStateType": 1013,
+    "MotorType": 1019,
+    "TaskControlStateMachineType": 1025,
+    "AxisType": 16601,
+    "PowerTrainType": 16794,
+    "EmergencyStopFunctionType": 17230,
+    "ProtectiveStopFunctionType": 17233,
+    "UserType": 18175,
+    "Controls": 4002,
+    "Moves": 18178,
+    "Requires": 18179,
+    "HasSafetyStates": 18182,
+}
+DI_IDS = {"SoftwareType": 15106, "DeviceSet": 5001}
+
+_ANALOG_UNIT = ua.NodeId(ua.ObjectIds.AnalogUnitType)
+_DATA_VARIABLE = ua.NodeId(ua.ObjectIds.BaseDataVariableType)
+_HAS_COMPONENT = ua.NodeId(ua.ObjectIds.HasComponent)
+_HAS_ADDIN = ua.NodeId(ua.ObjectIds.HasAddIn)
+_UNITS_URI = "http://www.opcfoundation.org/UA/units/un/cefact"
+
+
+def _unit(code: str, symbol: str, text: str) -> ua.EUInformation:
+    """A UNECE Rec 20 unit as OPC 10000-8 §5.6.3 encodes it (UnitId from the common code)."""
+    unit_id = 0
+    for ch in code:
+        unit_id = (unit_id << 8) | ord(ch)
+    return ua.EUInformation(
+        NamespaceUri=_UNITS_URI,
+        UnitId=unit_id,
+        DisplayName=ua.LocalizedText(symbol),
+        Description=ua.LocalizedText(text),
+    )
+
+
+UNITS = {
+    "deg": _unit("DD", "°", "degree"),
+    "deg/s": _unit("E96", "°/s", "degree per second"),
+    "Nm": _unit("NU", "N·m", "newton metre"),
+    "%": _unit("P1", "%", "percent"),
+    "degC": _unit("CEL", "°C", "degree Celsius"),
+}
+
+
+@dataclass
+class TaskNodes:
+    """One KRL interpreter as a TaskControl: program name, loaded flag, state machine."""
+
+    program_name: ua.NodeId
+    program_loaded: ua.NodeId
+    current_state: ua.NodeId
+    current_state_id: ua.NodeId
+    last_transition: ua.NodeId
+    last_transition_id: ua.NodeId
+
+
+@dataclass
+class RobotNodes:
+    """The NodeIds the poller writes for one robot."""
+
+    name: str
+    motion_device: ua.NodeId
+    controller: ua.NodeId
+    safety: ua.NodeId
+    #: identity key ("manufacturer", "model", ...) -> the nodes showing it
+    identity: dict[str, list[ua.NodeId]] = field(default_factory=dict)
+    position: list[ua.NodeId] = field(default_factory=list)
+    speed: list[ua.NodeId] = field(default_factory=list)
+    torque: list[ua.NodeId] = field(default_factory=list)
+    current: list[ua.NodeId] = field(default_factory=list)
+    temperature: list[ua.NodeId] = field(default_factory=list)
+    scalars: dict[str, ua.NodeId] = field(default_factory=dict)
+    tasks: dict[str, TaskNodes] = field(default_factory=dict)
+    extras: dict[str, ua.NodeId] = field(default_factory=dict)
+    connected: ua.NodeId | None = None
+    write_method: ua.NodeId | None = None
+
+
+@dataclass
+class CellNodes:
+    system: ua.NodeId
+    motion_devices: ua.NodeId
+    controllers: ua.NodeId
+    safety_states: ua.NodeId
+    ns: dict[str, int]
+    #: TaskControlStateMachineType's states and transitions: name -> (NodeId, number)
+    states: dict[str, tuple[ua.NodeId, int]]
+    transitions: dict[str, tuple[ua.NodeId, int]]
+
+
+def _rid(ns: dict[str, int], name: str) -> ua.NodeId:
+    return ua.NodeId(ROBOTICS_IDS[name], ns[ROBOTICS_URI])
+
+
+async def check_type_ids(server: Server, ns: dict[str, int]) -> None:
+    """Every hard-coded id names the node the specification says (a wrong NodeSet fails loud)."""
+    pairs = [(ua.NodeId(i, ns[ROBOTICS_URI]), n) for n, i in ROBOTICS_IDS.items()]
+    pairs += [(ua.NodeId(i, ns[DI_URI]), n) for n, i in DI_IDS.items()]
+    for node_id, name in pairs:
+        browse = await server.get_node(node_id).read_browse_name()
+        if browse.Name != name:
+            raise RuntimeError(f"NodeSet mismatch: {node_id.to_string()} is {browse.Name}, not {name}")
+
+
+async def _state_table(server: Server, ns: dict[str, int]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The states and transitions of TaskControlStateMachineType with their numbers."""
+    machine = server.get_node(_rid(ns, "TaskControlStateMachineType"))
+    states: dict[str, tuple[ua.NodeId, int]] = {}
+    transitions: dict[str, tuple[ua.NodeId, int]] = {}
+    for child in await machine.get_children(refs=ua.ObjectIds.HasComponent):
+        tdef = await child.read_type_definition()
+        if tdef not in (ua.NodeId(ua.ObjectIds.StateType), ua.NodeId(ua.ObjectIds.TransitionType)):
+            continue
+        name = (await child.read_browse_name()).Name
+        prop = "StateNumber" if tdef == ua.NodeId(ua.ObjectIds.StateType) else "TransitionNumber"
+        number = await (await child.get_child(prop)).read_value()
+        (states if prop == "StateNumber" else transitions)[name] = (child.nodeid, int(number))
+    return states, transitions
+
+
+async def build_cell(
+    server: Server, inst: Instantiator, ns: dict[str, int], cell_name: str
+) -> CellNodes:
+    """The MotionDeviceSystem in DI's DeviceSet, with its three folders."""
+    await check_type_ids(server, ns)
+    batch = NodeBatch()
+    ours = ns[GATEWAY_URI]
+    device_set = ua.NodeId(DI_IDS["DeviceSet"], ns[DI_URI])
+    system = await inst.add(
+        batch,
+        device_set,
+        cell_name,
+        ua.QualifiedName(cell_name, ours),
+        _rid(ns, "MotionDeviceSystemType"),
+    )
+    await _commit(server, batch)
+    states, transitions = await _state_table(server, ns)
+    return CellNodes(
+        system,
+        ua.NodeId(f"{cell_name}.MotionDevices", ours),
+        ua.NodeId(f"{cell_name}.Controllers", ours),
+        ua.NodeId(f"{cell_name}.SafetyStates", ours),
+        ns,
+        states,
+        transitions,
+    )
+
+
+async def _commit(server: Server, batch: NodeBatch) -> None:
+    session = server.iserver.isession
+    results = await session.add_nodes(batch.items)
+    for item, res in zip(batch.items, results, strict=True):
+        if not res.StatusCode.is_good():
+            raise RuntimeError(f"cannot add {item.RequestedNewNodeId.to_string()}: {res.StatusCode}")
+    if batch.references:
+        for item, code in zip(batch.references, await session.add_references(batch.references), strict=True):
+            if not code.is_good():
+                raise RuntimeError(f"cannot add reference from {item.SourceNodeId.to_string()}: {code}")
+
+
+class RobotBuilder:
+    """Adds one robot's MotionDevice, Controller and SafetyState (one AddNodes call)."""
+
+    def __init__(self, server: Server, inst: Instantiator, cell: CellNodes) -> None:
+        self.server, self.inst, self.cell = server, inst, cell
+        self.ns = cell.ns
+        self.ours = cell.ns[GATEWAY_URI]
+        self.r = cell.ns[ROBOTICS_URI]
+        self.di = cell.ns[DI_URI]
+
+    def _q(self, name: str, ns: int | None = None) -> ua.QualifiedName:
+        return ua.QualifiedName(name, self.ours if ns is None else ns)
+
+    def _id(self, path: str) -> ua.NodeId:
+        return ua.NodeId(path, self.ours)
+
+    async def build(self, name: str, extras: tuple[str, ...]) -> RobotNodes:
+        batch = NodeBatch()
+        cell = self.cell
+        md_path = f"{cell.motion_devices.Identifier}.{name}"
+        ctrl_path = f"{cell.controllers.Identifier}.{name}"
+        safe_path = f"{cell.safety_states.Identifier}.{name}"
+        md = await self.inst.add(
+            batch, cell.motion_devices, md_path, self._q(name), _rid(self.ns, "MotionDeviceType"),
+            optional=frozenset({"ComponentName", "TaskControlReference", "ParameterSet/InControl"}),
+        )
+        ctrl = await self.inst.add(
+            batch, cell.controllers, ctrl_path, self._q(name), _rid(self.ns, "ControllerType"),
+            optional=frozenset({"ComponentName", "ParameterSet"}),
+        )
+        safe = await self.inst.add(
+            batch, cell.safety_states, safe_path, self._q(name), _rid(self.ns, "SafetyStateType"),
+            optional=frozenset({"EmergencyStopFunctions", "ProtectiveStopFunctions"}),
+        )
+        nodes = RobotNodes(name, md, ctrl, safe)
+        await self._motion_device(batch, nodes, md_path)
+        await self._controller(batch, nodes, ctrl_path, extras)
+        await self._safety(batch, nodes, safe_path)
+        batch.reference(ctrl, _rid(self.ns, "Controls"), md)
+        batch.reference(ctrl, _rid(self.ns, "HasSafetyStates"), safe)
+        await _commit(self.server, batch)
+        return nodes
+
+    async def _motion_device(self, batch: NodeBatch, nodes: RobotNodes, path: str) -> None:
+        for key, prop in (("manufacturer", "Manufacturer"), ("model", "Model"),
+                          ("product_code", "ProductCode"), ("serial", "SerialNumber"),
+                          ("name", "ComponentName")):  # fmt: skip
+            nodes.identity.setdefault(key, []).append(self._id(f"{path}.{prop}"))
+        nodes.identity["category"] = [self._id(f"{path}.MotionDeviceCategory")]
+        nodes.scalars["override"] = self._id(f"{path}.ParameterSet.SpeedOverride")
+        nodes.scalars["in_control"] = self._id(f"{path}.ParameterSet.InControl")
+        nodes.identity["task_reference"] = [self._id(f"{path}.TaskControlReference")]
+        for i, axis in enumerate(AXES, 1):
+            axis_id = await self.inst.add(
+                batch, self._id(f"{path}.Axes"), f"{path}.Axes.{axis}", self._q(axis),
+                _rid(self.ns, "AxisType"), optional=frozenset({"ParameterSet/ActualSpeed"}),
+            )
+            nodes.identity.setdefault("motion_profile", []).append(self._id(f"{path}.Axes.{axis}.MotionProfile"))
+            nodes.position.append(self._id(f"{path}.Axes.{axis}.ParameterSet.ActualPosition"))
+            nodes.speed.append(self._id(f"{path}.Axes.{axis}.ParameterSet.ActualSpeed"))
+            pt_path = f"{path}.PowerTrains.PowerTrain{i}"
+            pt = await self.inst.add(
+                batch, self._id(f"{path}.PowerTrains"), pt_path, self._q(f"PowerTrain{i}"),
+                _rid(self.ns, "PowerTrainType"),
+            )
+            motor_path = f"{pt_path}.Motor{i}"
+            await self.inst.add(
+                batch, pt, motor_path, self._q(f"Motor{i}"), _rid(self.ns, "MotorType")
+            )
+            for key, prop in (("motor_manufacturer", "Manufacturer"), ("motor_model", "Model"),
+                              ("motor_product_code", "ProductCode"), ("motor_serial", "SerialNumber")):  # fmt: skip
+                nodes.identity.setdefault(key, []).append(self._id(f"{motor_path}.{prop}"))
+            params = self._id(f"{motor_path}.ParameterSet")
+            nodes.temperature.append(self._id(f"{motor_path}.ParameterSet.MotorTemperature"))
+            nodes.torque.append(await self._analog(batch, params, f"{motor_path}.ParameterSet.ActualTorque", "ActualTorque"))
+            nodes.current.append(await self._analog(batch, params, f"{motor_path}.ParameterSet.ActualCurrent", "ActualCurrent"))
+            batch.reference(pt, _rid(self.ns, "Moves"), axis_id)
+            batch.reference(axis_id, _rid(self.ns, "Requires"), pt)
+
+    async def _analog(self, batch: NodeBatch, parent: ua.NodeId, node_id: str, name: str) -> ua.NodeId:
+        double = {"DataType": ua.NodeId(ua.ObjectIds.Double)}
+        return await self.inst.add(
+            batch, parent, node_id, self._q(name), _ANALOG_UNIT, attributes=double
+        )
+
+    async def _controller(
+        self, batch: NodeBatch, nodes: RobotNodes, path: str, extras: tuple[str, ...]
+    ) -> None:
+        for key, prop in (("controller_manufacturer", "Manufacturer"), ("controller_model", "Model"),
+                          ("controller_product_code", "ProductCode"), ("controller_serial", "SerialNumber"),
+                          ("name", "ComponentName")):  # fmt: skip
+            nodes.identity.setdefault(key, []).append(self._id(f"{path}.{prop}"))
+        nodes.identity["user_level"] = [self._id(f"{path}.CurrentUser.Level")]
+        sw_path = f"{path}.Software.KSS"
+        await self.inst.add(
+            batch, self._id(f"{path}.Software"), sw_path, self._q("KSS"),
+            ua.NodeId(DI_IDS["SoftwareType"], self.di),
+            optional=frozenset({"SoftwareRevision"}),
+        )
+        for key, prop in (("software_manufacturer", "Manufacturer"), ("software_model", "Model"),
+                          ("software_revision", "SoftwareRevision")):  # fmt: skip
+            nodes.identity.setdefault(key, []).append(self._id(f"{sw_path}.{prop}"))
+        for key, label in (("robot", "RobotInterpreter"), ("submit", "SubmitInterpreter")):
+            tc_path = f"{path}.TaskControls.{label}"
+            await self.inst.add(
+                batch, self._id(f"{path}.TaskControls"), tc_path, self._q(label),
+                _rid(self.ns, "TaskControlType"), optional=frozenset({"TaskControlOperation"}),
+            )
+            nodes.identity.setdefault(f"{key}_task_name", []).append(self._id(f"{tc_path}.ComponentName"))
+            sm = f"{tc_path}.TaskControlOperation.TaskControlStateMachine"
+            nodes.tasks[key] = TaskNodes(
+                self._id(f"{tc_path}.ParameterSet.TaskProgramName"),
+                self._id(f"{tc_path}.ParameterSet.TaskProgramLoaded"),
+                self._id(f"{sm}.CurrentState"),
+                self._id(f"{sm}.CurrentState.Id"),
+                self._id(f"{sm}.LastTransition"),
+                self._id(f"{sm}.LastTransition.Id"),
+            )
+        params = self._id(f"{path}.ParameterSet")
+        nodes.connected = await self._variable(
+            batch, params, f"{path}.ParameterSet.Connected", "Connected", ua.ObjectIds.Boolean
+        )
+        for extra in extras:
+            nodes.extras[extra] = await self._variable(
+                batch, params, f"{path}.ParameterSet.{extra}", extra, ua.ObjectIds.BaseDataType
+            )
+
+    async def _variable(
+        self, batch: NodeBatch, parent: ua.NodeId, node_id: str, name: str, data_type: int
+    ) -> ua.NodeId:
+        return await self.inst.add(
+            batch, parent, node_id, self._q(name), _DATA_VARIABLE,
+            attributes={"DataType": ua.NodeId(data_type)},
+        )
+
+    async def _safety(self, batch: NodeBatch, nodes: RobotNodes, path: str) -> None:
+        p = f"{path}.ParameterSet"
+        nodes.scalars["mode"] = self._id(f"{p}.OperationalMode")
+        nodes.scalars["estop"] = self._id(f"{p}.EmergencyStop")
+        nodes.scalars["pstop"] = self._id(f"{p}.ProtectiveStop")
+        functions = (
+            ("EmergencyStopFunctions", "EmergencyStop", "EmergencyStopFunctionType", "estop_fn"),
+            ("ProtectiveStopFunctions", "OperatorSafety", "ProtectiveStopFunctionType", "opsafe_fn"),
+            ("ProtectiveStopFunctions", "StopMessage", "ProtectiveStopFunctionType", "stopmess_fn"),
+        )
+        for folder, fname, tname, key in functions:
+            f_path = f"{path}.{folder}.{fname}"
+            await self.inst.add(
+                batch, self._id(f"{path}.{folder}"), f_path, self._q(fname), _rid(self.ns, tname)
+            )
+            nodes.identity.setdefault(f"{key}_name", []).append(self._id(f"{f_path}.Name"))
+            nodes.scalars[f"{key}_active"] = self._id(f"{f_path}.Active")
+            if tname == "ProtectiveStopFunctionType":
+                nodes.scalars[f"{key}_enabled"] = self._id(f"{f_path}.Enabled")

@@ -1,0 +1,185 @@
+"""The gateway: one asyncua server, one :class:`~.poller.RobotPoller` task per robot.
+
+::
+
+    async with Gateway(load_cell("cell.toml")) as gw:
+        print(gw.url)               # opc.tcp://127.0.0.1:4840 (the real port when 0 was asked)
+        await gw.serve_forever()
+
+Start-up: asyncua's standard address space, the DI/IA/Robotics NodeSets, then every robot's
+nodes; :attr:`Gateway.timings` has the seconds each step took (``kvp gateway`` logs them and
+bench/gateway.py reports them). Security (docs/gateway.md): on a loopback endpoint without a
+[security] table the server offers None/Anonymous only; otherwise it offers nothing but
+Basic256Sha256 Sign&Encrypt with user name and password, so an anonymous or unencrypted
+client is refused before it sees a single node.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import time
+from types import TracebackType
+from typing import Self
+from urllib.parse import urlsplit
+
+from asyncua import Server, ua
+
+from .cell import CellConfig
+from .model import GATEWAY_URI, Instantiator, load_nodesets
+from .poller import RobotPoller, Sink
+from .robotics import CellNodes, RobotBuilder, RobotNodes, build_cell
+from .security import GatewayUserManager, ensure_certificate
+from .writes import WRITE_METHOD, add_write_method
+
+__all__ = ["Gateway"]
+
+log = logging.getLogger(__name__)
+
+
+class Gateway:
+    """Serves a cell (see the module doc). ``start()``/``stop()`` or ``async with``."""
+
+    def __init__(self, cell: CellConfig) -> None:
+        self.cell = cell
+        self.server: Server | None = None
+        self.nodes: CellNodes | None = None
+        self.robots: dict[str, RobotNodes] = {}
+        self.pollers: dict[str, RobotPoller] = {}
+        self.sink: Sink | None = None
+        self.timings: dict[str, float] = {}
+        self.fingerprint: str | None = None
+        self.port = 0
+        self._tasks: list[asyncio.Task[None]] = []
+
+    @property
+    def url(self) -> str:
+        return f"opc.tcp://{_url_host(self.cell.host)}:{self.port}"
+
+    @property
+    def application_uri(self) -> str:
+        return f"{GATEWAY_URI}:{self.cell.name}"
+
+    async def start(self) -> None:
+        cell = self.cell
+        sec = cell.security
+        t0 = time.perf_counter()
+        server = Server(user_manager=GatewayUserManager(sec.users, anonymous=not sec.enabled))
+        await server.init()
+        self.timings["address_space"] = time.perf_counter() - t0
+        self.server = server
+        server.set_server_name(f"pyopenshowvar kvp gateway ({cell.name})")
+        await server.set_application_uri(self.application_uri)
+        server.product_uri = "urn:pyopenshowvar:kvp-gateway"
+        server.manufacturer_name = "pyopenshowvar"
+        server.allow_remote_admin(False)
+        server.set_endpoint(f"opc.tcp://{_url_host(cell.host)}:{cell.port}")
+        await self._security(server)
+
+        t1 = time.perf_counter()
+        ns = await load_nodesets(server)
+        self.timings["nodesets"] = time.perf_counter() - t1
+        t2 = time.perf_counter()
+        inst = Instantiator(server, ns[GATEWAY_URI])
+        self.nodes = await build_cell(server, inst, ns, cell.name)
+        builder = RobotBuilder(server, inst, self.nodes)
+        self.sink = Sink(server)
+        from pyopenshowvar.kinematics import KR6R900SIXX
+
+        for robot in cell.robots:
+            nodes = await builder.build(robot.name, robot.exposed)
+            self.robots[robot.name] = nodes
+            speeds = robot.max_axis_speed or tuple(float(s) for s in KR6R900SIXX.max_speed)
+            poller = RobotPoller(robot, nodes, self.nodes, self.sink, speeds)
+            self.pollers[robot.name] = poller
+            if robot.writable:
+                method_id = ua.NodeId(f"{nodes.controller.Identifier}.{WRITE_METHOD}", ns[GATEWAY_URI])
+                await add_write_method(server.get_node(nodes.controller), method_id, ns[GATEWAY_URI], poller)
+                nodes.write_method = method_id
+        self.timings["robots"] = time.perf_counter() - t2
+
+        await server.start()
+        self._bound_port(server)
+        for name, poller in self.pollers.items():
+            self._tasks.append(asyncio.create_task(poller.run(), name=f"poll {name}"))
+        self.timings["total"] = time.perf_counter() - t0
+        log.info(
+            "serving %s: %d robots; start-up %.2f s (address space %.2f, NodeSets %.2f, robots %.2f)",
+            self.url, len(cell.robots), self.timings["total"], self.timings["address_space"],
+            self.timings["nodesets"], self.timings["robots"],
+        )  # fmt: skip
+
+    async def _security(self, server: Server) -> None:
+        sec = self.cell.security
+        if not sec.enabled:
+            server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
+            server.set_identity_tokens([ua.AnonymousIdentityToken])
+            return
+        cert, key, self.fingerprint = await asyncio.to_thread(
+            ensure_certificate, sec.pki_dir, self.application_uri, self.cell.host
+        )
+        await server.load_certificate(str(cert))
+        await server.load_private_key(str(key))
+        server.set_security_policy([ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt])
+        server.set_identity_tokens([ua.UserNameIdentityToken])
+        if sec.trusted_clients is not None:
+            from asyncua.crypto.truststore import TrustStore
+            from asyncua.crypto.validator import CertificateValidator
+
+            store = TrustStore([sec.trusted_clients], [])
+            await store.load()
+            server.set_certificate_validator(CertificateValidator(trust_store=store))
+        log.info("server certificate %s, SHA-256 %s", cert, self.fingerprint)
+
+    def _bound_port(self, server: Server) -> None:
+        """Learn the real port (port 0 in the cell file) and advertise it in every endpoint."""
+        assert server.bserver is not None
+        self.port = server.bserver.port
+        url = self.url
+        server.set_endpoint(url)
+        for edp in server.iserver.endpoints:
+            edp.EndpointUrl = url
+            edp.Server.DiscoveryUrls = [url]
+
+    async def serve_forever(self) -> None:
+        await asyncio.Event().wait()
+
+    async def stop(self) -> None:
+        for poller in self.pollers.values():
+            poller.stop()
+        for task in self._tasks:
+            with contextlib.suppress(asyncio.TimeoutError):
+                await asyncio.wait_for(asyncio.shield(task), 2.0)
+            task.cancel()
+        for task in self._tasks:
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await task
+        self._tasks.clear()
+        if self.server is not None:
+            await self.server.stop()
+            self.server = None
+
+    async def __aenter__(self) -> Self:
+        try:
+            await self.start()
+        except BaseException:
+            await self.stop()
+            raise
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        await self.stop()
+
+
+def _url_host(host: str) -> str:
+    return f"[{host}]" if ":" in host else host
+
+
+def endpoint_port(url: str) -> int:
+    return urlsplit(url).port or 0
