@@ -33,7 +33,9 @@ def gateway(
     ] = None,
     hash_password: Annotated[
         bool,
-        typer.Option("--hash-password", help="Read a password and print its hash for the cell file."),
+        typer.Option(
+            "--hash-password", help="Read a password and print its hash for the cell file."
+        ),
     ] = False,
     log_level: Annotated[
         str, typer.Option("--log-level", help="debug, info, warning or error (stderr).")

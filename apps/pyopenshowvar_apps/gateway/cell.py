@@ -47,7 +47,9 @@ __all__ = [
 DEFAULT_ENDPOINT = "opc.tcp://127.0.0.1:4840"
 _NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,31}")
 # A KRL variable as KUKAVARPROXY reads it: a global or system name, optional index and members.
-_KRL_NAME = re.compile(r"\$?[A-Za-z_][A-Za-z0-9_]*(\[[0-9, ]*\])?(\.[A-Za-z_][A-Za-z0-9_]*(\[[0-9, ]*\])?)*")
+_KRL_NAME = re.compile(
+    r"\$?[A-Za-z_][A-Za-z0-9_]*(\[[0-9, ]*\])?(\.[A-Za-z_][A-Za-z0-9_]*(\[[0-9, ]*\])?)*"
+)
 MAX_POLL_HZ = 50.0
 MAX_ROBOTS = 200
 
@@ -167,7 +169,9 @@ def parse_cell(data: Mapping[str, Any], *, source: Path | None = None) -> CellCo
     name = _str(cell.get("name", "cell"), f"{where}: cell.name")
     if not _NAME.fullmatch(name):
         raise CellError(f"{where}: cell.name {name!r}: letters, digits, _ and -, 1-32 characters")
-    endpoint = _endpoint(_str(cell.get("endpoint", DEFAULT_ENDPOINT), f"{where}: cell.endpoint"), where)
+    endpoint = _endpoint(
+        _str(cell.get("endpoint", DEFAULT_ENDPOINT), f"{where}: cell.endpoint"), where
+    )
     host = urlsplit(endpoint).hostname or ""
     security = _security(data.get("security"), host, base, where)
     robots_raw = data.get("robot", [])
@@ -224,7 +228,9 @@ def _security(raw: Any, host: str, base: Path, where: str) -> SecurityConfig:
 
         problem = check_hash_format(phash)
         if problem:
-            raise CellError(f"{what}.password_hash: {problem} (make one with kvp gateway --hash-password)")
+            raise CellError(
+                f"{what}.password_hash: {problem} (make one with kvp gateway --hash-password)"
+            )
         users.append(UserEntry(uname, phash))
     if enabled and not users:
         raise CellError(f"{where}: security is on but security.users is empty")
@@ -238,9 +244,17 @@ def _robot(raw: Any, index: int, where: str) -> RobotConfig:
     what = f"{where}: robot #{index}"
     r = _table(raw, what)
     allowed = {
-        "name", "host", "port", "poll_hz", "timeout", "variables", "writable",
-        "allow_motion_writes", "max_axis_speed", "snapshot",
-    }  # fmt: skip
+        "name",
+        "host",
+        "port",
+        "poll_hz",
+        "timeout",
+        "variables",
+        "writable",
+        "allow_motion_writes",
+        "max_axis_speed",
+        "snapshot",
+    }
     _no_extra(r, allowed, what)
     name = _str(r.get("name"), f"{what}.name")
     if not _NAME.fullmatch(name):
@@ -275,7 +289,9 @@ def _robot(raw: Any, index: int, where: str) -> RobotConfig:
         speeds = tuple(_number(s, f"{what}.max_axis_speed") for s in speeds_raw)
         if any(s <= 0 for s in speeds):
             raise CellError(f"{what}.max_axis_speed: every speed must be > 0")
-    snaps = tuple(_snapshot(s, f"{what}.snapshot[{i}]") for i, s in enumerate(r.get("snapshot", []), 1))
+    snaps = tuple(
+        _snapshot(s, f"{what}.snapshot[{i}]") for i, s in enumerate(r.get("snapshot", []), 1)
+    )
     return RobotConfig(
         name, host, port, poll_hz, timeout, variables, writable, motion, speeds, snaps
     )

@@ -30,7 +30,7 @@ state machine: ``#P_FREE`` (no program selected) → Idle, ``#P_RESET``, ``#P_ST
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping, Sequence, Set
 from typing import Any
 
 from pyopenshowvar import KrlEnum, Struct
@@ -121,15 +121,28 @@ def _floats(values: Any, count: int, scale: Sequence[float] | float = 1.0) -> li
     return [v * s for v, s in zip(raw, scale, strict=True)]
 
 
-def poll_values(values: Mapping[str, Any], max_speed: Sequence[float]) -> dict[str, Any]:
+_SAFETY = frozenset({"$MODE_OP", "$ALARM_STOP", "$USER_SAF", "$STOPMESS"})
+
+
+def poll_values(
+    values: Mapping[str, Any],
+    max_speed: Sequence[float],
+    changed: Set[str] | None = None,
+) -> dict[str, Any]:
     """The per-poll node values from the typed values of :data:`POLL_VARIABLES`.
 
     Keys missing from ``values`` (unknown on this controller, or not read) give no entry, so
-    their nodes keep their last value and status.
+    their nodes keep their last value and status. With ``changed`` (the variables whose text
+    changed this poll) only the entries that depend on them are computed: at 500 polls a
+    second, recomputing and comparing unchanged values is most of the work.
     """
+
+    def want(*names: str) -> bool:
+        return changed is None or any(n in changed for n in names)
+
     out: dict[str, Any] = {}
     axes = values.get("$AXIS_ACT")
-    if isinstance(axes, Struct):
+    if want("$AXIS_ACT") and isinstance(axes, Struct):
         try:
             out["position"] = [float(axes.members[a]) for a in _AXES]
         except (KeyError, TypeError, ValueError):
@@ -140,27 +153,28 @@ def poll_values(values: Mapping[str, Any], max_speed: Sequence[float]) -> dict[s
         ("torque", "$TORQUE_AXIS_ACT[]", 1.0),
         ("current", "$CURR_ACT[]", 1.0),
     ):
-        converted = _floats(values.get(name), 6, scale)
+        converted = _floats(values.get(name), 6, scale) if want(name) else None
         if converted is not None:
             out[key] = converted
-    temps = _floats(values.get("$MOT_TEMP[]"), 6)
+    temps = _floats(values.get("$MOT_TEMP[]"), 6) if want("$MOT_TEMP[]") else None
     if temps is not None:
         out["temperature"] = [t - KELVIN for t in temps]
-    if isinstance(values.get("$OV_PRO"), int | float):
+    if want("$OV_PRO") and isinstance(values.get("$OV_PRO"), int | float):
         out["override"] = float(values["$OV_PRO"])
-    if isinstance(values.get("$DRIVES_ON"), bool):
+    if want("$DRIVES_ON") and isinstance(values.get("$DRIVES_ON"), bool):
         out["in_control"] = values["$DRIVES_ON"]
     for key, state_var, name_var in (
         ("robot", "$PRO_STATE1", "$PRO_NAME1[]"),
         ("submit", "$PRO_STATE0", "$PRO_NAME0[]"),
     ):
-        if state_var in values:
+        if state_var in values and want(state_var):
             state = task_state(values[state_var])
             out[f"{key}_state"] = state
             out[f"{key}_loaded"] = state != "Idle"
-        if name_var in values:
+        if name_var in values and want(name_var):
             out[f"{key}_program"] = text_of(values[name_var])
-    out.update(_safety(values))
+    if want(*_SAFETY):
+        out.update(_safety(values))
     return out
 
 

@@ -53,11 +53,13 @@ _PLACEHOLDERS = {
     ua.NodeId(ua.ObjectIds.ModellingRule_MandatoryPlaceholder),
     ua.NodeId(ua.ObjectIds.ModellingRule_OptionalPlaceholder),
 }
-_HIERARCHICAL = ua.NodeId(ua.ObjectIds.HierarchicalReferences)
+_HAS_COMPONENT = ua.NodeId(ua.ObjectIds.HasComponent)
 
 
 def _nodeset_text(name: str) -> str:
-    text = resources.files(__package__).joinpath("nodesets").joinpath(name).read_text(encoding="utf-8")
+    text = (
+        resources.files(__package__).joinpath("nodesets").joinpath(name).read_text(encoding="utf-8")
+    )
     root = ET.fromstring(text)
     design_only = [n for n in root if n.get("DesignToolOnly") == "true"]
     if not design_only:
@@ -134,7 +136,9 @@ class Instantiator:
         own: list[Decl] = []
         if is_type:
             for t in await self._supertypes(node):
-                own += [d for d in await self._declared(t) if _key(d.browse_name) not in _names(own)]
+                own += [
+                    d for d in await self._declared(t) if _key(d.browse_name) not in _names(own)
+                ]
         else:
             own = await self._declared(node)
             tdef = await self._type_of(node)
@@ -152,7 +156,7 @@ class Instantiator:
         browse_name: ua.QualifiedName,
         type_definition: ua.NodeId,
         *,
-        reference: ua.NodeId = ua.NodeId(ua.ObjectIds.HasComponent),
+        reference: ua.NodeId = _HAS_COMPONENT,
         optional: frozenset[str] = frozenset(),
         source: ua.NodeId | None = None,
         attributes: dict[str, Any] | None = None,
@@ -299,7 +303,9 @@ def _key(name: ua.QualifiedName) -> tuple[int, str]:
 
 
 def _copy(attrs: dict[str, Any], node_class: ua.NodeClass, name: ua.QualifiedName) -> Any:
-    out: Any = ua.ObjectAttributes() if node_class == ua.NodeClass.Object else ua.VariableAttributes()
+    out: Any = (
+        ua.ObjectAttributes() if node_class == ua.NodeClass.Object else ua.VariableAttributes()
+    )
     given: dict[str, Any] = {"DisplayName": attrs.get("DisplayName") or ua.LocalizedText(name.Name)}
     if attrs.get("Description") is not None:
         given["Description"] = attrs["Description"]

@@ -37,45 +37,52 @@ __all__ = ["RobotPoller", "Sink"]
 
 log = logging.getLogger(__name__)
 
-_GOOD = ua.StatusCode(ua.StatusCodes.Good)
+_VALUE = ua.AttributeIds.Value
 BACKOFF_MIN, BACKOFF_MAX = 0.25, 2.0
 _V = ua.VariantType
 
 
 class Sink:
-    """Writes node values into the address space when the value or its status changed."""
+    """Writes node values into the address space when the value or its status changed.
+
+    The hot path of the gateway (two dozen writes per poll of a moving robot): it talks to
+    asyncua's address space directly and keys its memory by the NodeId's string identifier,
+    whose hash Python caches (a NodeId hashes a fresh tuple every time).
+    """
 
     def __init__(self, server: Server) -> None:
         self.server = server
-        self._last: dict[ua.NodeId, Any] = {}
-        self._typed: set[ua.NodeId] = set()
+        self._aspace = server.iserver.aspace
+        self._last: dict[Any, Any] = {}
+        self._typed: set[Any] = set()
         self.writes = 0
 
     async def set(self, node: ua.NodeId, value: Any, vtype: ua.VariantType, ts: datetime) -> None:
-        if self._last.get(node, _MISSING) == value:
+        key = node.Identifier
+        if self._last.get(key, _MISSING) == value:
             return
-        self._last[node] = value
+        self._last[key] = value
         self.writes += 1
         dv = ua.DataValue(ua.Variant(value, vtype), SourceTimestamp=ts, ServerTimestamp=ts)
-        await self.server.write_attribute_value(node, dv)
+        await self._aspace.write_attribute_value(node, _VALUE, dv)
 
     async def set_typed(
         self, node: ua.NodeId, value: Any, vtype: ua.VariantType, ts: datetime
     ) -> None:
         """For a BaseDataType node: fix its DataType to ``vtype`` the first time, then set."""
-        if node not in self._typed:
-            self._typed.add(node)
+        if node.Identifier not in self._typed:
+            self._typed.add(node.Identifier)
             dt = ua.DataValue(ua.Variant(ua.NodeId(vtype.value), ua.VariantType.NodeId))
-            await self.server.write_attribute_value(node, dt, ua.AttributeIds.DataType)
+            await self._aspace.write_attribute_value(node, ua.AttributeIds.DataType, dt)
         await self.set(node, value, vtype, ts)
 
     async def bad(self, node: ua.NodeId, code: int, ts: datetime) -> None:
         marker = ("bad", code)
-        if self._last.get(node, _MISSING) == marker:
+        if self._last.get(node.Identifier, _MISSING) == marker:
             return
-        self._last[node] = marker
+        self._last[node.Identifier] = marker
         dv = ua.DataValue(StatusCode=ua.StatusCode(code), SourceTimestamp=ts, ServerTimestamp=ts)
-        await self.server.write_attribute_value(node, dv)
+        await self._aspace.write_attribute_value(node, _VALUE, dv)
 
 
 _MISSING = object()
@@ -118,7 +125,9 @@ class RobotPoller:
                 backoff = BACKOFF_MIN
             except (KvpError, OSError, TimeoutError) as exc:
                 if self.connected or not self.last_error:
-                    log.warning("robot %s (%s:%d): %s", self.cfg.name, self.cfg.host, self.cfg.port, exc)
+                    log.warning(
+                        "robot %s (%s:%d): %s", self.cfg.name, self.cfg.host, self.cfg.port, exc
+                    )
                 self.last_error = str(exc) or type(exc).__name__
             finally:
                 await self._disconnect()
@@ -131,6 +140,7 @@ class RobotPoller:
             backoff = min(backoff * 2, BACKOFF_MAX)
 
     def stop(self) -> None:
+        """Ask :meth:`run` to end; the owner then cancels the task if it sleeps."""
         self._stop.set()
 
     async def _disconnect(self) -> None:
@@ -145,7 +155,9 @@ class RobotPoller:
 
     async def _session(self) -> None:
         cfg = self.cfg
-        client = Client(cfg.host, cfg.port, timeout=cfg.timeout, connect_timeout=cfg.timeout, keepalive=None)
+        client = Client(
+            cfg.host, cfg.port, timeout=cfg.timeout, connect_timeout=cfg.timeout, keepalive=None
+        )
         self.client = client
         await client.connect()
         names = await self._identity(client)
@@ -163,8 +175,8 @@ class RobotPoller:
             now = time.monotonic()
             if due < now:  # late: skip the missed periods instead of bunching polls
                 due = now + period - (now - due) % period
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._stop.wait(), due - now)
+            # a plain sleep: stop() cancels the task, so no per-poll waiter on the event
+            await asyncio.sleep(due - now)
 
     # ------------------------------------------------------------------ reads
 
@@ -182,16 +194,26 @@ class RobotPoller:
         ident = identity_values(values)
         stamp = datetime.now(UTC)
         strings = {
-            "product_code": ident["product_code"], "serial": ident["serial"],
-            "software_revision": ident["software_revision"], "controller_product_code": "",
-            "controller_serial": "", "motor_product_code": "", "motor_serial": "", "user_level": "",
-        }  # fmt: skip
+            "product_code": ident["product_code"],
+            "serial": ident["serial"],
+            "software_revision": ident["software_revision"],
+            "controller_product_code": "",
+            "controller_serial": "",
+            "motor_product_code": "",
+            "motor_serial": "",
+            "user_level": "",
+        }
         texts = {
-            "manufacturer": "KUKA", "model": ident["model"], "name": ident["name"] or self.cfg.name,
-            "controller_manufacturer": "KUKA", "controller_model": "KUKA Robot Controller (KRC)",
-            "motor_manufacturer": "KUKA", "motor_model": "",
-            "software_manufacturer": "KUKA", "software_model": "KUKA System Software",
-        }  # fmt: skip
+            "manufacturer": "KUKA",
+            "model": ident["model"],
+            "name": ident["name"] or self.cfg.name,
+            "controller_manufacturer": "KUKA",
+            "controller_model": "KUKA Robot Controller (KRC)",
+            "motor_manufacturer": "KUKA",
+            "motor_model": "",
+            "software_manufacturer": "KUKA",
+            "software_model": "KUKA System Software",
+        }
         for key, value in strings.items():
             for node in self.nodes.identity.get(key, []):
                 await self.sink.set(node, value, _V.String, stamp)
@@ -211,18 +233,30 @@ class RobotPoller:
         tasks = self.nodes.tasks
         if n.identity.get("task_reference") and "robot" in tasks:
             robot_task = tasks["robot"].program_name
-            tc = ua.NodeId(robot_task.Identifier.rsplit(".ParameterSet.", 1)[0], robot_task.NamespaceIndex)
+            tc = ua.NodeId(
+                robot_task.Identifier.rsplit(".ParameterSet.", 1)[0], robot_task.NamespaceIndex
+            )
             await s.set(n.identity["task_reference"][0], tc, _V.NodeId, stamp)
-        for key, label in (("robot_task_name", "Robot interpreter ($PRO_STATE1)"),
-                           ("submit_task_name", "Submit interpreter ($PRO_STATE0)")):  # fmt: skip
+        for key, label in (
+            ("robot_task_name", "Robot interpreter ($PRO_STATE1)"),
+            ("submit_task_name", "Submit interpreter ($PRO_STATE0)"),
+        ):
             for node in n.identity.get(key, []):
                 await s.set(node, ua.LocalizedText(label), _V.LocalizedText, stamp)
-        for key, label in (("estop_fn_name", "$ALARM_STOP"), ("opsafe_fn_name", "$USER_SAF"),
-                           ("stopmess_fn_name", "$STOPMESS")):  # fmt: skip
+        for key, label in (
+            ("estop_fn_name", "$ALARM_STOP"),
+            ("opsafe_fn_name", "$USER_SAF"),
+            ("stopmess_fn_name", "$STOPMESS"),
+        ):
             for node in n.identity.get(key, []):
                 await s.set(node, label, _V.String, stamp)
-        for unit, nodes in (("deg", n.position), ("deg/s", n.speed), ("Nm", n.torque),
-                            ("%", n.current), ("degC", n.temperature)):  # fmt: skip
+        for unit, nodes in (
+            ("deg", n.position),
+            ("deg/s", n.speed),
+            ("Nm", n.torque),
+            ("%", n.current),
+            ("degC", n.temperature),
+        ):
             for node in nodes:
                 eu = ua.NodeId(f"{node.Identifier}.EngineeringUnits", node.NamespaceIndex)
                 await s.set(eu, UNITS[unit], _V.ExtensionObject, stamp)
@@ -230,7 +264,7 @@ class RobotPoller:
     async def _apply(
         self, results: Mapping[str, Any], names: list[str], stamp: datetime
     ) -> list[str]:
-        changed = False
+        changed: set[str] = set()
         keep = names
         for name, r in results.items():
             if r.error is not None:
@@ -250,12 +284,12 @@ class RobotPoller:
             value = _parse(r.text)
             snapshot = self._snapshot(name)
             if snapshot is not None:
-                self._fan_out(snapshot, value)
+                changed |= self._fan_out(snapshot, value)
             else:
                 self._values[name] = value
-            changed = True
+                changed.add(name)
         if changed:
-            await self._publish(stamp)
+            await self._publish(stamp, changed)
         if self.nodes.connected is not None:
             await self.sink.set(self.nodes.connected, True, _V.Boolean, stamp)
         return keep
@@ -263,14 +297,22 @@ class RobotPoller:
     def _snapshot(self, name: str) -> SnapshotGroup | None:
         return next((s for s in self.cfg.snapshots if s.variable == name), None)
 
-    def _fan_out(self, group: SnapshotGroup, value: Any) -> None:
+    def _fan_out(self, group: SnapshotGroup, value: Any) -> set[str]:
+        """Store the members of a snapshot STRUC under their variables' names; which changed."""
         if not isinstance(value, Struct):
             log.warning("robot %s: snapshot %s is not a STRUC", self.cfg.name, group.variable)
-            return
+            return set()
         members = {k.upper(): v for k, v in value.members.items()}
+        changed: set[str] = set()
         for original, member in group.members.items():
-            if member.upper() in members:
-                self._values[self._alias.get(canonical(original), original)] = members[member.upper()]
+            name = self._alias.get(canonical(original), original)
+            if (
+                member.upper() in members
+                and self._values.get(name, _MISSING) != members[member.upper()]
+            ):
+                self._values[name] = members[member.upper()]
+                changed.add(name)
+        return changed
 
     async def _missing(self, name: str, stamp: datetime) -> None:
         node = self.nodes.extras.get(name)
@@ -279,19 +321,31 @@ class RobotPoller:
 
     # ------------------------------------------------------------------ writes to nodes
 
-    async def _publish(self, stamp: datetime) -> None:
-        values = poll_values(self._values, self.max_speed)
+    async def _publish(self, stamp: datetime, changed: set[str] | None = None) -> None:
+        values = poll_values(self._values, self.max_speed, changed)
         n, s = self.nodes, self.sink
-        for key, nodes in (("position", n.position), ("speed", n.speed), ("torque", n.torque),
-                           ("current", n.current), ("temperature", n.temperature)):  # fmt: skip
+        for key, nodes in (
+            ("position", n.position),
+            ("speed", n.speed),
+            ("torque", n.torque),
+            ("current", n.current),
+            ("temperature", n.temperature),
+        ):
             if key in values:
                 for node, v in zip(nodes, values[key], strict=False):
                     await s.set(node, v, _V.Double, stamp)
-        for key, vtype in (("override", _V.Double), ("in_control", _V.Boolean), ("mode", _V.Int32),
-                           ("estop", _V.Boolean), ("pstop", _V.Boolean),
-                           ("estop_fn_active", _V.Boolean), ("opsafe_fn_active", _V.Boolean),
-                           ("opsafe_fn_enabled", _V.Boolean), ("stopmess_fn_active", _V.Boolean),
-                           ("stopmess_fn_enabled", _V.Boolean)):  # fmt: skip
+        for key, vtype in (
+            ("override", _V.Double),
+            ("in_control", _V.Boolean),
+            ("mode", _V.Int32),
+            ("estop", _V.Boolean),
+            ("pstop", _V.Boolean),
+            ("estop_fn_active", _V.Boolean),
+            ("opsafe_fn_active", _V.Boolean),
+            ("opsafe_fn_enabled", _V.Boolean),
+            ("stopmess_fn_active", _V.Boolean),
+            ("stopmess_fn_enabled", _V.Boolean),
+        ):
             if key in values and key in n.scalars:
                 await s.set(n.scalars[key], values[key], vtype, stamp)
         for key, task in n.tasks.items():
@@ -302,7 +356,7 @@ class RobotPoller:
             if f"{key}_state" in values:
                 await self._task_state(key, values[f"{key}_state"], stamp)
         for name, node in n.extras.items():
-            if name in self._values:
+            if name in self._values and (changed is None or name in changed):
                 variant = _variant(self._values[name], self._texts.get(name, ""))
                 await s.set_typed(node, variant.Value, variant.VariantType, stamp)
 
@@ -316,7 +370,12 @@ class RobotPoller:
             await s.set(task.current_state_id, state_id[0], _V.NodeId, stamp)
         transition = self.cell.transitions.get(f"{before}To{state}") if before else None
         if transition is not None and before != state:
-            await s.set(task.last_transition, ua.LocalizedText(f"{before}To{state}"), _V.LocalizedText, stamp)
+            await s.set(
+                task.last_transition,
+                ua.LocalizedText(f"{before}To{state}"),
+                _V.LocalizedText,
+                stamp,
+            )
             await s.set(task.last_transition_id, transition[0], _V.NodeId, stamp)
 
     async def _mark_bad(self, code: int) -> None:

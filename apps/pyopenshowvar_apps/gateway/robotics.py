@@ -141,7 +141,9 @@ async def check_type_ids(server: Server, ns: dict[str, int]) -> None:
     for node_id, name in pairs:
         browse = await server.get_node(node_id).read_browse_name()
         if browse.Name != name:
-            raise RuntimeError(f"NodeSet mismatch: {node_id.to_string()} is {browse.Name}, not {name}")
+            raise RuntimeError(
+                f"NodeSet mismatch: {node_id.to_string()} is {browse.Name}, not {name}"
+            )
 
 
 async def _state_table(server: Server, ns: dict[str, int]) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -193,11 +195,17 @@ async def _commit(server: Server, batch: NodeBatch) -> None:
     results = await session.add_nodes(batch.items)
     for item, res in zip(batch.items, results, strict=True):
         if not res.StatusCode.is_good():
-            raise RuntimeError(f"cannot add {item.RequestedNewNodeId.to_string()}: {res.StatusCode}")
+            raise RuntimeError(
+                f"cannot add {item.RequestedNewNodeId.to_string()}: {res.StatusCode}"
+            )
     if batch.references:
-        for item, code in zip(batch.references, await session.add_references(batch.references), strict=True):
+        for item, code in zip(
+            batch.references, await session.add_references(batch.references), strict=True
+        ):
             if not code.is_good():
-                raise RuntimeError(f"cannot add reference from {item.SourceNodeId.to_string()}: {code}")
+                raise RuntimeError(
+                    f"cannot add reference from {item.SourceNodeId.to_string()}: {code}"
+                )
 
 
 class RobotBuilder:
@@ -223,15 +231,27 @@ class RobotBuilder:
         ctrl_path = f"{cell.controllers.Identifier}.{name}"
         safe_path = f"{cell.safety_states.Identifier}.{name}"
         md = await self.inst.add(
-            batch, cell.motion_devices, md_path, self._q(name), _rid(self.ns, "MotionDeviceType"),
+            batch,
+            cell.motion_devices,
+            md_path,
+            self._q(name),
+            _rid(self.ns, "MotionDeviceType"),
             optional=frozenset({"ComponentName", "TaskControlReference", "ParameterSet/InControl"}),
         )
         ctrl = await self.inst.add(
-            batch, cell.controllers, ctrl_path, self._q(name), _rid(self.ns, "ControllerType"),
+            batch,
+            cell.controllers,
+            ctrl_path,
+            self._q(name),
+            _rid(self.ns, "ControllerType"),
             optional=frozenset({"ComponentName", "ParameterSet"}),
         )
         safe = await self.inst.add(
-            batch, cell.safety_states, safe_path, self._q(name), _rid(self.ns, "SafetyStateType"),
+            batch,
+            cell.safety_states,
+            safe_path,
+            self._q(name),
+            _rid(self.ns, "SafetyStateType"),
             optional=frozenset({"EmergencyStopFunctions", "ProtectiveStopFunctions"}),
         )
         nodes = RobotNodes(name, md, ctrl, safe)
@@ -244,9 +264,13 @@ class RobotBuilder:
         return nodes
 
     async def _motion_device(self, batch: NodeBatch, nodes: RobotNodes, path: str) -> None:
-        for key, prop in (("manufacturer", "Manufacturer"), ("model", "Model"),
-                          ("product_code", "ProductCode"), ("serial", "SerialNumber"),
-                          ("name", "ComponentName")):  # fmt: skip
+        for key, prop in (
+            ("manufacturer", "Manufacturer"),
+            ("model", "Model"),
+            ("product_code", "ProductCode"),
+            ("serial", "SerialNumber"),
+            ("name", "ComponentName"),
+        ):
             nodes.identity.setdefault(key, []).append(self._id(f"{path}.{prop}"))
         nodes.identity["category"] = [self._id(f"{path}.MotionDeviceCategory")]
         nodes.scalars["override"] = self._id(f"{path}.ParameterSet.SpeedOverride")
@@ -254,32 +278,55 @@ class RobotBuilder:
         nodes.identity["task_reference"] = [self._id(f"{path}.TaskControlReference")]
         for i, axis in enumerate(AXES, 1):
             axis_id = await self.inst.add(
-                batch, self._id(f"{path}.Axes"), f"{path}.Axes.{axis}", self._q(axis),
-                _rid(self.ns, "AxisType"), optional=frozenset({"ParameterSet/ActualSpeed"}),
+                batch,
+                self._id(f"{path}.Axes"),
+                f"{path}.Axes.{axis}",
+                self._q(axis),
+                _rid(self.ns, "AxisType"),
+                optional=frozenset({"ParameterSet/ActualSpeed"}),
             )
-            nodes.identity.setdefault("motion_profile", []).append(self._id(f"{path}.Axes.{axis}.MotionProfile"))
+            nodes.identity.setdefault("motion_profile", []).append(
+                self._id(f"{path}.Axes.{axis}.MotionProfile")
+            )
             nodes.position.append(self._id(f"{path}.Axes.{axis}.ParameterSet.ActualPosition"))
             nodes.speed.append(self._id(f"{path}.Axes.{axis}.ParameterSet.ActualSpeed"))
             pt_path = f"{path}.PowerTrains.PowerTrain{i}"
             pt = await self.inst.add(
-                batch, self._id(f"{path}.PowerTrains"), pt_path, self._q(f"PowerTrain{i}"),
+                batch,
+                self._id(f"{path}.PowerTrains"),
+                pt_path,
+                self._q(f"PowerTrain{i}"),
                 _rid(self.ns, "PowerTrainType"),
             )
             motor_path = f"{pt_path}.Motor{i}"
             await self.inst.add(
                 batch, pt, motor_path, self._q(f"Motor{i}"), _rid(self.ns, "MotorType")
             )
-            for key, prop in (("motor_manufacturer", "Manufacturer"), ("motor_model", "Model"),
-                              ("motor_product_code", "ProductCode"), ("motor_serial", "SerialNumber")):  # fmt: skip
+            for key, prop in (
+                ("motor_manufacturer", "Manufacturer"),
+                ("motor_model", "Model"),
+                ("motor_product_code", "ProductCode"),
+                ("motor_serial", "SerialNumber"),
+            ):
                 nodes.identity.setdefault(key, []).append(self._id(f"{motor_path}.{prop}"))
             params = self._id(f"{motor_path}.ParameterSet")
             nodes.temperature.append(self._id(f"{motor_path}.ParameterSet.MotorTemperature"))
-            nodes.torque.append(await self._analog(batch, params, f"{motor_path}.ParameterSet.ActualTorque", "ActualTorque"))
-            nodes.current.append(await self._analog(batch, params, f"{motor_path}.ParameterSet.ActualCurrent", "ActualCurrent"))
+            nodes.torque.append(
+                await self._analog(
+                    batch, params, f"{motor_path}.ParameterSet.ActualTorque", "ActualTorque"
+                )
+            )
+            nodes.current.append(
+                await self._analog(
+                    batch, params, f"{motor_path}.ParameterSet.ActualCurrent", "ActualCurrent"
+                )
+            )
             batch.reference(pt, _rid(self.ns, "Moves"), axis_id)
             batch.reference(axis_id, _rid(self.ns, "Requires"), pt)
 
-    async def _analog(self, batch: NodeBatch, parent: ua.NodeId, node_id: str, name: str) -> ua.NodeId:
+    async def _analog(
+        self, batch: NodeBatch, parent: ua.NodeId, node_id: str, name: str
+    ) -> ua.NodeId:
         double = {"DataType": ua.NodeId(ua.ObjectIds.Double)}
         return await self.inst.add(
             batch, parent, node_id, self._q(name), _ANALOG_UNIT, attributes=double
@@ -288,27 +335,43 @@ class RobotBuilder:
     async def _controller(
         self, batch: NodeBatch, nodes: RobotNodes, path: str, extras: tuple[str, ...]
     ) -> None:
-        for key, prop in (("controller_manufacturer", "Manufacturer"), ("controller_model", "Model"),
-                          ("controller_product_code", "ProductCode"), ("controller_serial", "SerialNumber"),
-                          ("name", "ComponentName")):  # fmt: skip
+        for key, prop in (
+            ("controller_manufacturer", "Manufacturer"),
+            ("controller_model", "Model"),
+            ("controller_product_code", "ProductCode"),
+            ("controller_serial", "SerialNumber"),
+            ("name", "ComponentName"),
+        ):
             nodes.identity.setdefault(key, []).append(self._id(f"{path}.{prop}"))
         nodes.identity["user_level"] = [self._id(f"{path}.CurrentUser.Level")]
         sw_path = f"{path}.Software.KSS"
         await self.inst.add(
-            batch, self._id(f"{path}.Software"), sw_path, self._q("KSS"),
+            batch,
+            self._id(f"{path}.Software"),
+            sw_path,
+            self._q("KSS"),
             ua.NodeId(DI_IDS["SoftwareType"], self.di),
             optional=frozenset({"SoftwareRevision"}),
         )
-        for key, prop in (("software_manufacturer", "Manufacturer"), ("software_model", "Model"),
-                          ("software_revision", "SoftwareRevision")):  # fmt: skip
+        for key, prop in (
+            ("software_manufacturer", "Manufacturer"),
+            ("software_model", "Model"),
+            ("software_revision", "SoftwareRevision"),
+        ):
             nodes.identity.setdefault(key, []).append(self._id(f"{sw_path}.{prop}"))
         for key, label in (("robot", "RobotInterpreter"), ("submit", "SubmitInterpreter")):
             tc_path = f"{path}.TaskControls.{label}"
             await self.inst.add(
-                batch, self._id(f"{path}.TaskControls"), tc_path, self._q(label),
-                _rid(self.ns, "TaskControlType"), optional=frozenset({"TaskControlOperation"}),
+                batch,
+                self._id(f"{path}.TaskControls"),
+                tc_path,
+                self._q(label),
+                _rid(self.ns, "TaskControlType"),
+                optional=frozenset({"TaskControlOperation"}),
             )
-            nodes.identity.setdefault(f"{key}_task_name", []).append(self._id(f"{tc_path}.ComponentName"))
+            nodes.identity.setdefault(f"{key}_task_name", []).append(
+                self._id(f"{tc_path}.ComponentName")
+            )
             sm = f"{tc_path}.TaskControlOperation.TaskControlStateMachine"
             nodes.tasks[key] = TaskNodes(
                 self._id(f"{tc_path}.ParameterSet.TaskProgramName"),
@@ -331,7 +394,11 @@ class RobotBuilder:
         self, batch: NodeBatch, parent: ua.NodeId, node_id: str, name: str, data_type: int
     ) -> ua.NodeId:
         return await self.inst.add(
-            batch, parent, node_id, self._q(name), _DATA_VARIABLE,
+            batch,
+            parent,
+            node_id,
+            self._q(name),
+            _DATA_VARIABLE,
             attributes={"DataType": ua.NodeId(data_type)},
         )
 
@@ -342,7 +409,12 @@ class RobotBuilder:
         nodes.scalars["pstop"] = self._id(f"{p}.ProtectiveStop")
         functions = (
             ("EmergencyStopFunctions", "EmergencyStop", "EmergencyStopFunctionType", "estop_fn"),
-            ("ProtectiveStopFunctions", "OperatorSafety", "ProtectiveStopFunctionType", "opsafe_fn"),
+            (
+                "ProtectiveStopFunctions",
+                "OperatorSafety",
+                "ProtectiveStopFunctionType",
+                "opsafe_fn",
+            ),
             ("ProtectiveStopFunctions", "StopMessage", "ProtectiveStopFunctionType", "stopmess_fn"),
         )
         for folder, fname, tname, key in functions:

@@ -116,12 +116,11 @@ def ensure_certificate(pki_dir: Path, app_uri: str, host: str) -> tuple[Path, Pa
     A certificate whose subjectAltName lacks ``app_uri`` or ``host`` (the cell was renamed or
     moved) is replaced; the key is kept.
     """
+    from asyncua.crypto import cert_gen
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes, serialization
     from cryptography.hazmat.primitives.asymmetric import rsa
     from cryptography.x509.oid import ExtendedKeyUsageOID
-
-    from asyncua.crypto import cert_gen
 
     pki_dir.mkdir(parents=True, exist_ok=True)
     cert_path, key_path = pki_dir / "gateway-cert.der", pki_dir / "gateway-key.pem"

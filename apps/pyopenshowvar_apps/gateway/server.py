@@ -94,8 +94,12 @@ class Gateway:
             poller = RobotPoller(robot, nodes, self.nodes, self.sink, speeds)
             self.pollers[robot.name] = poller
             if robot.writable:
-                method_id = ua.NodeId(f"{nodes.controller.Identifier}.{WRITE_METHOD}", ns[GATEWAY_URI])
-                await add_write_method(server.get_node(nodes.controller), method_id, ns[GATEWAY_URI], poller)
+                method_id = ua.NodeId(
+                    f"{nodes.controller.Identifier}.{WRITE_METHOD}", ns[GATEWAY_URI]
+                )
+                await add_write_method(
+                    server.get_node(nodes.controller), method_id, ns[GATEWAY_URI], poller
+                )
                 nodes.write_method = method_id
         self.timings["robots"] = time.perf_counter() - t2
 
@@ -106,9 +110,13 @@ class Gateway:
         self.timings["total"] = time.perf_counter() - t0
         log.info(
             "serving %s: %d robots; start-up %.2f s (address space %.2f, NodeSets %.2f, robots %.2f)",
-            self.url, len(cell.robots), self.timings["total"], self.timings["address_space"],
-            self.timings["nodesets"], self.timings["robots"],
-        )  # fmt: skip
+            self.url,
+            len(cell.robots),
+            self.timings["total"],
+            self.timings["address_space"],
+            self.timings["nodesets"],
+            self.timings["robots"],
+        )
 
     async def _security(self, server: Server) -> None:
         sec = self.cell.security
@@ -149,8 +157,6 @@ class Gateway:
         for poller in self.pollers.values():
             poller.stop()
         for task in self._tasks:
-            with contextlib.suppress(asyncio.TimeoutError):
-                await asyncio.wait_for(asyncio.shield(task), 2.0)
             task.cancel()
         for task in self._tasks:
             with contextlib.suppress(asyncio.CancelledError, Exception):

@@ -60,7 +60,9 @@ def type_mismatch(current: Any, new: Any) -> str | None:
         unknown = [m for m in new.members if m.upper() not in {k.upper() for k in current.members}]
         return f"{_kind(current)} has no member {', '.join(unknown)}" if unknown else None
     if _kind(current) in ("INT", "REAL", "BOOL", "ENUM", "CHAR[]") or isinstance(current, Struct):
-        if _kind(new) != _kind(current) and not (isinstance(new, Struct) and isinstance(current, Struct)):
+        if _kind(new) != _kind(current) and not (
+            isinstance(new, Struct) and isinstance(current, Struct)
+        ):
             return f"the variable is {_kind(current)}, the value is {_kind(new)}"
     return None
 
@@ -103,7 +105,9 @@ async def write_variable(poller: RobotPoller, name: str, literal: str) -> str:
             current = None
         problem = type_mismatch(current, new) if current is not None else None
         if problem:
-            raise _fail(ua.StatusCodes.BadTypeMismatch, f"{cfg.name}: {name} = {literal}: {problem}")
+            raise _fail(
+                ua.StatusCodes.BadTypeMismatch, f"{cfg.name}: {name} = {literal}: {problem}"
+            )
         echo = await client.write(name, literal)
     except WriteRefusedError:
         raise _fail(
@@ -138,7 +142,9 @@ async def add_write_method(node: Any, method_id: ua.NodeId, ns: int, poller: Rob
         method_id,
         ua.QualifiedName(WRITE_METHOD, ns),
         handler,
-        [arg("Variable", "KRL variable listed writable in the cell file, e.g. $OV_PRO"),
-         arg("Value", "KRL literal, e.g. 50 or {A1 10.0}")],  # fmt: skip
+        [
+            arg("Variable", "KRL variable listed writable in the cell file, e.g. $OV_PRO"),
+            arg("Value", "KRL literal, e.g. 50 or {A1 10.0}"),
+        ],
         [arg("Echo", "the value as the controller answered it")],
     )

@@ -1,0 +1,194 @@
+"""The gateway's pure parts: the cell file, password hashes, the KRC-to-Robotics mapping and the
+write type check (no sockets, no server)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from pyopenshowvar_apps.gateway.cell import CellError, load_cell, parse_cell
+from pyopenshowvar_apps.gateway.mapping import poll_values, task_state
+from pyopenshowvar_apps.gateway.security import (
+    GatewayUserManager,
+    check_hash_format,
+    hash_password,
+    verify_password,
+)
+from pyopenshowvar_apps.gateway.writes import type_mismatch
+
+from pyopenshowvar import KrlEnum, parse_value
+
+ROBOT = {"name": "r1", "host": "10.0.0.5"}
+
+
+def cell(**kw: object) -> dict[str, object]:
+    return {"cell": {"endpoint": "opc.tcp://127.0.0.1:0"}, "robot": [dict(ROBOT)], **kw}
+
+
+def test_a_minimal_cell_gets_the_documented_defaults() -> None:
+    c = parse_cell({"robot": [dict(ROBOT)]})
+    assert c.endpoint == "opc.tcp://127.0.0.1:4840"
+    assert not c.security.enabled
+    r = c.robots[0]
+    assert (r.port, r.poll_hz, r.timeout, r.variables, r.writable) == (7000, 10.0, 1.0, (), ())
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        ({"robot": []}, "at least one [[robot]]"),
+        (cell(extra=1), "unknown key(s) ['extra']"),
+        ({"robot": [{**ROBOT, "polhz": 5}]}, "unknown key(s) ['polhz']"),
+        ({"robot": [{**ROBOT, "poll_hz": 0}]}, "poll_hz must be > 0"),
+        ({"robot": [{**ROBOT, "port": 70000}]}, "port must be an integer in 1..65535"),
+        ({"robot": [dict(ROBOT), dict(ROBOT)]}, "robot names must be unique"),
+        ({"robot": [{**ROBOT, "name": "a b"}]}, "letters, digits"),
+        ({"robot": [{**ROBOT, "variables": ["$OV PRO;"]}]}, "is not a KRL variable name"),
+        ({"robot": [{**ROBOT, "writable": ["$OV_PRO"]}]}, "set allow_motion_writes = true"),
+        ({"robot": [{**ROBOT, "max_axis_speed": [1, 2]}]}, "needs 6 numbers"),
+        ({"cell": {"endpoint": "http://x:1"}, "robot": [dict(ROBOT)]}, "expected opc.tcp://"),
+        # beyond loopback: security is required, and cannot be switched off
+        (
+            {"cell": {"endpoint": "opc.tcp://0.0.0.0:4840"}, "robot": [dict(ROBOT)]},
+            "beyond loopback",
+        ),
+        (
+            {
+                "cell": {"endpoint": "opc.tcp://192.168.1.2:4840"},
+                "security": {"enabled": False},
+                "robot": [dict(ROBOT)],
+            },
+            "only allowed on a loopback endpoint",
+        ),
+        (cell(security={"users": []}), "security.users is empty"),
+        (cell(security={"users": [{"name": "a", "password_hash": "secret"}]}), "expected pbkdf2"),
+    ],
+)
+def test_bad_cells_are_refused_with_the_key_named(data: dict[str, object], message: str) -> None:
+    with pytest.raises(CellError) as err:
+        parse_cell(data)
+    assert message in str(err.value)
+
+
+def test_a_cell_file_on_disk(tmp_path: Path) -> None:
+    path = tmp_path / "cell.toml"
+    path.write_text(
+        '[cell]\nname = "line-1"\n[[robot]]\nname = "r1"\nhost = "127.0.0.1"\n'
+        'writable = ["$OV_PRO"]\nallow_motion_writes = true\nvariables = ["$OV_JOG"]\n'
+        '[[robot.snapshot]]\nvariable = "GW_SNAP"\nmembers = { "$AXIS_ACT" = "AX" }\n'
+    )
+    c = load_cell(path)
+    assert c.name == "line-1" and c.security.pki_dir == tmp_path / "pki"
+    r = c.robots[0]
+    assert r.exposed == ("$OV_JOG", "$OV_PRO") and r.is_writable("$ov_pro")
+    assert not r.is_writable("$OV_JOG")
+    assert r.snapshots[0].members == {"$AXIS_ACT": "AX"}
+    path.write_text("[cell\n")
+    with pytest.raises(CellError, match="not valid TOML"):
+        load_cell(path)
+
+
+@settings(max_examples=10, deadline=None)
+@given(st.text(min_size=0, max_size=40))
+def test_password_hashes_verify_only_their_password(password: str) -> None:
+    stored = hash_password(password, iterations=10_000)
+    assert check_hash_format(stored) is None
+    assert verify_password(password, stored)
+    assert not verify_password(password + "x", stored)
+
+
+def test_user_manager_knows_anonymous_only_when_told() -> None:
+    users = parse_cell(
+        cell(
+            security={
+                "users": [{"name": "op", "password_hash": hash_password("pw", iterations=10_000)}]
+            }
+        )
+    ).security.users
+    secure = GatewayUserManager(users, anonymous=False)
+    assert secure.get_user(None) is None
+    assert secure.get_user(None, "op", "bad") is None
+    assert secure.get_user(None, "nobody", "pw") is None
+    assert secure.get_user(None, "op", "pw").name == "op"
+    assert GatewayUserManager((), anonymous=True).get_user(None).name == "anonymous"
+
+
+def test_poll_values_map_krc_variables_onto_the_robotics_model() -> None:
+    texts = {
+        "$AXIS_ACT": "{E6AXIS: A1 1.0, A2 -90.0, A3 90.0, A4 0.0, A5 0.5, A6 0.0, E1 0.0, E2 0.0, E3 0.0, E4 0.0, E5 0.0, E6 0.0}",
+        "$VEL_AXIS_ACT[]": "50.0 0.0 0.0 0.0 0.0 -10.0 0.0 0.0 0.0 0.0 0.0 0.0",
+        "$TORQUE_AXIS_ACT[]": "0.0 -24.78 -25.5 -0.8 -0.6 0.0 0.0 0.0 0.0 0.0 0.0 0.0",
+        "$MOT_TEMP[]": "300 301 302 303 304 305 0 0 0 0 0 0",
+        "$OV_PRO": "75",
+        "$DRIVES_ON": "TRUE",
+        "$MODE_OP": "#EX",
+        "$ALARM_STOP": "FALSE",
+        "$USER_SAF": "FALSE",
+        "$STOPMESS": "FALSE",
+        "$PRO_STATE1": "#P_STOP",
+        "$PRO_NAME1[]": '"FOLLOW"',
+    }
+    values = {k: parse_value(v) for k, v in texts.items()}
+    out = poll_values(values, [360.0] * 6)
+    assert out["position"] == [1.0, -90.0, 90.0, 0.0, 0.5, 0.0]
+    assert out["speed"][0] == pytest.approx(180.0) and out["speed"][5] == pytest.approx(-36.0)
+    assert out["torque"][1] == -24.78
+    assert out["temperature"][0] == pytest.approx(26.85)
+    assert (out["override"], out["in_control"], out["mode"]) == (75.0, True, 4)
+    assert out["estop"] is True  # $ALARM_STOP is active low
+    assert out["opsafe_fn_active"] and out["pstop"]  # guard open in #EX
+    assert (out["robot_state"], out["robot_loaded"], out["robot_program"]) == (
+        "Ready",
+        True,
+        "FOLLOW",
+    )
+    # in T1 the guard is not monitored, and only what changed is recomputed
+    values["$MODE_OP"] = KrlEnum("T1")
+    out = poll_values(values, [360.0] * 6, changed={"$MODE_OP"})
+    assert out == {
+        "mode": 1,
+        "estop": True,
+        "estop_fn_active": True,
+        "opsafe_fn_enabled": False,
+        "opsafe_fn_active": False,
+        "stopmess_fn_enabled": True,
+        "stopmess_fn_active": False,
+        "pstop": False,
+    }
+
+
+@pytest.mark.parametrize(
+    ("state", "expected"),
+    [
+        ("#P_FREE", "Idle"),
+        ("#P_RESET", "Ready"),
+        ("#P_ACTIVE", "Executing"),
+        ("#P_STOP", "Ready"),
+        ("#P_END", "Ready"),
+    ],
+)
+def test_interpreter_states_map_onto_the_task_control_state_machine(
+    state: str, expected: str
+) -> None:
+    assert task_state(parse_value(state)) == expected
+
+
+@pytest.mark.parametrize(
+    ("current", "new", "ok"),
+    [
+        ("100", "50", True),
+        ("1.5", "2", True),
+        ("100", "1.5", False),
+        ("TRUE", "1", False),
+        ("#T1", "#T2", True),
+        ("#T1", "5", False),
+        ('"AB"', '"CD"', True),
+        ("{A1 1.0, A2 2.0}", "{A1 5.0}", True),
+        ("{A1 1.0, A2 2.0}", "{X 5.0}", False),
+        ("{A1 1.0}", "5", False),
+    ],
+)
+def test_writes_must_fit_the_current_type(current: str, new: str, ok: bool) -> None:
+    assert (type_mismatch(parse_value(current), parse_value(new)) is None) is ok
