@@ -35,6 +35,7 @@ SCRIPTS = [
     ("Latency profile", "latency_pacing.py"),
     ("Motion kernel", "motion_kss.py"),
     ("Web jog pad", "web_jog.py"),
+    ("Gateway", "gateway.py"),
 ]
 
 
