@@ -39,7 +39,9 @@ class Cell:
 
 
 def _emu(port: int = 0) -> Emulator:
-    return Emulator(EmulatorConfig(port=port, latency="none", discovery=False, idle_timeout=0))
+    # the ideal plant: exact set-points and the cheapest robot (the gateway is under test here)
+    config = EmulatorConfig(port=port, discovery=False, idle_timeout=0, plant="ideal")
+    return Emulator(config)
 
 
 @pytest_asyncio.fixture(scope="module", loop_scope="module")
@@ -56,7 +58,7 @@ async def cell() -> AsyncIterator[Cell]:
                     "poll_hz": 20,
                     "timeout": 0.5,
                     "variables": ["$OV_JOG", "MYAXIS"],
-                    "writable": ["$OV_PRO"] if name == "r1" else [],
+                    "writable": ["$OV_PRO", "MYAXIS"] if name == "r1" else [],
                     "allow_motion_writes": True,
                 }
                 for name, emu in emus.items()
@@ -237,7 +239,7 @@ async def test_writes_only_through_the_method_and_only_listed_variables(cell: Ce
         async with Client("127.0.0.1", cell.emus["r1"].port) as kvp:
             assert await kvp.read("$OV_JOG") == "100"
         # a listed one: written, echoed, and the model shows it
-        assert await ctrl.call_method(method, "$OV_PRO", "40") == "40"
+        assert await ctrl.call_method(method, "$OV_PRO", "40") == ["40", ""]
         override = client.get_node(node_id(ours, "MotionDevices.r1.ParameterSet.SpeedOverride"))
         await wait_for(lambda: _equals(override, 40.0))
         # a literal of the wrong type or no KRL at all is refused before sending
@@ -257,7 +259,11 @@ async def test_writes_only_through_the_method_and_only_listed_variables(cell: Ce
         )
         # r2 lists nothing writable: it has no write method at all
         assert cell.gw.robots["r2"].write_method is None
-        assert await ctrl.call_method(method, "$OV_PRO", "100") == "100"
+        assert await ctrl.call_method(method, "$OV_PRO", "100") == ["100", ""]
+        # a motion variable (allowed by the cell file) whose value stops the program: written,
+        # and the stop is reported like kvp write's exit 7 (this leaves r1's program stopped)
+        echo, stop = await ctrl.call_method(method, "MYAXIS", "{A1 9999.0}")
+        assert "9999" in echo and "#P_STOP" in stop
 
 
 async def _equals(node: Any, value: float) -> bool:

@@ -64,7 +64,7 @@ async def _secure_client(
 
 @pytest.mark.timeout(120)
 async def test_secured_gateway_refuses_anonymous_and_unencrypted_clients(tmp_path: Path) -> None:
-    async with Emulator(EmulatorConfig(port=0, discovery=False, idle_timeout=0)) as emu:
+    async with Emulator(EmulatorConfig(port=0, discovery=False, idle_timeout=0, plant="ideal")) as emu:
         secret = "correct horse battery"
         cell = tmp_path / "cell.toml"
         cell.write_text(

@@ -1,5 +1,5 @@
-"""The gateway's pure parts: the cell file, password hashes, the KRC-to-Robotics mapping and the
-write type check (no sockets, no server)."""
+"""The gateway's pure parts: the cell file, password hashes and the KRC-to-Robotics mapping
+(no sockets, no server)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,6 @@ from pyopenshowvar_apps.gateway.security import (
     hash_password,
     verify_password,
 )
-from pyopenshowvar_apps.gateway.writes import type_mismatch
 
 from pyopenshowvar import KrlEnum, parse_value
 
@@ -173,22 +172,3 @@ def test_interpreter_states_map_onto_the_task_control_state_machine(
     state: str, expected: str
 ) -> None:
     assert task_state(parse_value(state)) == expected
-
-
-@pytest.mark.parametrize(
-    ("current", "new", "ok"),
-    [
-        ("100", "50", True),
-        ("1.5", "2", True),
-        ("100", "1.5", False),
-        ("TRUE", "1", False),
-        ("#T1", "#T2", True),
-        ("#T1", "5", False),
-        ('"AB"', '"CD"', True),
-        ("{A1 1.0, A2 2.0}", "{A1 5.0}", True),
-        ("{A1 1.0, A2 2.0}", "{X 5.0}", False),
-        ("{A1 1.0}", "5", False),
-    ],
-)
-def test_writes_must_fit_the_current_type(current: str, new: str, ok: bool) -> None:
-    assert (type_mismatch(parse_value(current), parse_value(new)) is None) is ok
