@@ -38,6 +38,8 @@ from pyopenshowvar import KrlEnum, Struct
 __all__ = [
     "IDENTITY_VARIABLES",
     "POLL_VARIABLES",
+    "SLOW_EVERY",
+    "SLOW_VARIABLES",
     "identity_values",
     "operational_mode",
     "poll_values",
@@ -65,6 +67,12 @@ POLL_VARIABLES = (
     "$PRO_STATE0",
     "$PRO_NAME0[]",
 )
+
+#: Read only every SLOW_EVERY-th poll (2 Hz at the default 10 Hz): motor temperatures change
+#: over minutes, and program names only when a program is selected (the interpreter states,
+#: which tell that at once, stay in every poll). Saves a fifth of the KVP requests.
+SLOW_VARIABLES = frozenset({"$MOT_TEMP[]", "$PRO_NAME1[]", "$PRO_NAME0[]", "$PRO_STATE0"})
+SLOW_EVERY = 5
 
 # OPC 40010-1 OperationalModeEnumeration
 _MODES = {"T1": 1, "T2": 2, "AUT": 3, "EX": 4}

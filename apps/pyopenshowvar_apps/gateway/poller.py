@@ -1,8 +1,9 @@
 """One task per robot: connect, read everything in one pipelined batch per poll, publish.
 
-Each poll is ONE :meth:`Client.read_many` of :data:`~.mapping.POLL_VARIABLES`, the cell file's
-extra variables and its snapshot groups (a snapshot group is one read of a STRUC the
-controller fills, fanned out to its member variables). Only texts that changed since the last
+Each poll is ONE :meth:`Client.read_many` of :data:`~.mapping.POLL_VARIABLES` (the slow ones,
+:data:`~.mapping.SLOW_VARIABLES`, every fifth poll), the cell file's extra variables and its
+snapshot groups (a snapshot group is one read of a STRUC the controller fills, fanned out to
+its member variables). Only texts that changed since the last
 poll are parsed, and only node values that changed are written, so a robot at rest costs the
 event loop almost nothing beyond the KVP round trip. Every value written carries the time the
 reply arrived as its SourceTimestamp.
@@ -30,7 +31,14 @@ from pyopenshowvar import Client, KrlEnum, KvpError, Struct, UnknownVariableErro
 from pyopenshowvar.errors import KrlValueError
 
 from .cell import RobotConfig, SnapshotGroup, canonical
-from .mapping import IDENTITY_VARIABLES, POLL_VARIABLES, identity_values, poll_values
+from .mapping import (
+    IDENTITY_VARIABLES,
+    POLL_VARIABLES,
+    SLOW_EVERY,
+    SLOW_VARIABLES,
+    identity_values,
+    poll_values,
+)
 from .robotics import UNITS, CellNodes, RobotNodes
 
 __all__ = ["RobotPoller", "Sink"]
@@ -166,10 +174,16 @@ class RobotPoller:
         log.info("robot %s connected (%s:%d)", cfg.name, cfg.host, cfg.port)
         period = 1.0 / cfg.poll_hz
         due = time.monotonic()
+        fast = [n for n in names if n not in SLOW_VARIABLES]
+        count = 0
         while not self._stop.is_set():
-            results = await client.read_many(names, timeout=cfg.timeout)
+            batch = names if count % SLOW_EVERY == 0 else fast
+            count += 1
+            results = await client.read_many(batch, timeout=cfg.timeout)
             stamp = datetime.now(UTC)
-            names = await self._apply(results, names, stamp)
+            kept = await self._apply(results, names, stamp)
+            if kept is not names:
+                names, fast = kept, [n for n in kept if n not in SLOW_VARIABLES]
             self.polls += 1
             due += period
             now = time.monotonic()
