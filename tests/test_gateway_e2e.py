@@ -31,6 +31,12 @@ from pyopenshowvar import Client  # noqa: E402
 pytestmark = [pytest.mark.asyncio(loop_scope="module"), pytest.mark.timeout(90)]
 
 ROBOTS = ("r1", "r2", "r3")
+# r4 has a snapshot group: a STRUC its controller fills (here: written by the test)
+SNAPSHOT_DAT = """DEFDAT $CONFIG
+STRUC GWSNAP_T E6AXIS AX, INT OV
+DECL GWSNAP_T GW_SNAP={AX {A1 1.5, A2 -90.0, A3 90.0, A4 0.0, A5 0.0, A6 0.0, E1 0.0, E2 0.0, E3 0.0, E4 0.0, E5 0.0, E6 0.0}, OV 55}
+ENDDAT
+"""
 
 
 class Cell:
@@ -38,15 +44,17 @@ class Cell:
         self.gw, self.emus = gw, emus
 
 
-def _emu(port: int = 0) -> Emulator:
+def _emu(port: int = 0, dat: str | None = None) -> Emulator:
     # the ideal plant: exact set-points and the cheapest robot (the gateway is under test here)
-    config = EmulatorConfig(port=port, discovery=False, idle_timeout=0, plant="ideal")
+    config = EmulatorConfig(port=port, discovery=False, idle_timeout=0, plant="ideal", dat_text=dat)
     return Emulator(config)
 
 
 @pytest_asyncio.fixture(scope="module", loop_scope="module")
 async def cell() -> AsyncIterator[Cell]:
     emus = {name: await _emu().start() for name in ROBOTS}
+    emus["r4"] = await _emu(dat=SNAPSHOT_DAT).start()
+    snapshot = {"variable": "GW_SNAP", "members": {"$AXIS_ACT": "AX", "$ov_pro": "OV"}}
     config = parse_cell(
         {
             "cell": {"name": "testcell", "endpoint": "opc.tcp://127.0.0.1:0"},
@@ -60,6 +68,7 @@ async def cell() -> AsyncIterator[Cell]:
                     "variables": ["$OV_JOG", "MYAXIS"],
                     "writable": ["$OV_PRO", "MYAXIS"] if name == "r1" else [],
                     "allow_motion_writes": True,
+                    "snapshot": [snapshot] if name == "r4" else [],
                 }
                 for name, emu in emus.items()
             ],
@@ -112,7 +121,7 @@ async def test_motion_devices_are_found_by_their_type_definition(cell: Cell) -> 
         for child in await folder.get_children():
             if await child.read_type_definition() == motion_device_type:
                 found[(await child.read_browse_name()).Name] = child
-        assert sorted(found) == list(ROBOTS)
+        assert sorted(found) == [*ROBOTS, "r4"]
         r1 = found["r1"]
         # mandatory properties carry the controller's identity ($MODEL_NAME[], $KR_SERIALNO)
         await wait_for(lambda: _is_good(r1, "2:Manufacturer"))
@@ -269,3 +278,17 @@ async def test_writes_only_through_the_method_and_only_listed_variables(cell: Ce
 async def _equals(node: Any, value: float) -> bool:
     dv = await node.read_data_value(raise_on_bad_status=False)
     return dv.StatusCode.is_good() and dv.Value.Value == value
+
+
+async def test_a_snapshot_group_is_read_as_one_struc_and_fanned_out(cell: Cell) -> None:
+    """r4's $AXIS_ACT and $OV_PRO come from GW_SNAP (one KVP request), not from themselves."""
+    assert cell.gw.pollers["r4"].poll_names()[0] == "GW_SNAP"
+    assert "$AXIS_ACT" not in cell.gw.pollers["r4"].poll_names()
+    async with ua_client(cell.gw) as (client, ours, _):
+        override = client.get_node(node_id(ours, "MotionDevices.r4.ParameterSet.SpeedOverride"))
+        a1 = client.get_node(node_id(ours, "MotionDevices.r4.Axes.A1.ParameterSet.ActualPosition"))
+        await wait_for(lambda: _equals(override, 55.0))  # the real $OV_PRO is 100
+        assert await a1.read_value() == 1.5  # the real $AXIS_ACT.A1 is 0
+        async with Client("127.0.0.1", cell.emus["r4"].port) as kvp:
+            await kvp.write("GW_SNAP.OV", "33")
+        await wait_for(lambda: _equals(override, 33.0))
