@@ -142,6 +142,17 @@ async def test_motion_devices_are_found_by_their_type_definition(cell: Cell) -> 
         state = client.get_node(node_id(ours, "SafetyStates.r1.ParameterSet.OperationalMode"))
         await wait_for(lambda: _is_good(state))
         assert await state.read_value() == 3  # #AUT -> AUTOMATIC
+        # the robot interpreter runs the follow program: Executing, the type's own state node
+        machine = "Controllers.r1.TaskControls.RobotInterpreter.TaskControlOperation"
+        current = client.get_node(node_id(ours, f"{machine}.TaskControlStateMachine.CurrentState"))
+        assert (await current.read_value()).Text == "Executing"
+        state_id = await (await current.get_child("0:Id")).read_value()
+        assert state_id == ua.NodeId(5042, rob)  # TaskControlStateMachineType/Executing
+        name = client.get_node(node_id(ours, "Controllers.r1.TaskControls.RobotInterpreter"))
+        program = await (
+            await name.get_child(["2:ParameterSet", f"{rob}:TaskProgramName"])
+        ).read_value()
+        assert program  # $PRO_NAME1[]
 
 
 async def _is_good(node: Any, child: str | None = None) -> bool:
@@ -255,9 +266,10 @@ async def test_writes_only_through_the_method_and_only_listed_variables(cell: Ce
         with pytest.raises(ua.UaStatusCodeError) as bad_type:
             await ctrl.call_method(method, "$OV_PRO", "#T1")
         assert bad_type.value.code == ua.StatusCodes.BadTypeMismatch
-        with pytest.raises(ua.UaStatusCodeError) as not_krl:
-            await ctrl.call_method(method, "$OV_PRO", "{A1")
-        assert not_krl.value.code == ua.StatusCodes.BadInvalidArgument
+        for junk in ("{A1", "1" * 5000):  # not KRL; absurdly long (bounded work per call)
+            with pytest.raises(ua.UaStatusCodeError) as not_krl:
+                await ctrl.call_method(method, "$OV_PRO", junk)
+            assert not_krl.value.code == ua.StatusCodes.BadInvalidArgument
         # the Write service is refused on every variable the gateway serves
         jog = client.get_node(node_id(ours, "Controllers.r1.ParameterSet.$OV_JOG"))
         with pytest.raises(ua.UaStatusCodeError) as write:

@@ -257,6 +257,8 @@ class RobotPoller:
         ):
             for node in n.identity.get(key, []):
                 await s.set(node, ua.LocalizedText(label), _V.LocalizedText, stamp)
+        for task in tasks.values():  # 0 = Unknown: KVP cannot tell who changed the state
+            await s.set(task.last_transition_reason, 0, _V.Int16, stamp)
         for key, label in (
             ("estop_fn_name", "$ALARM_STOP"),
             ("opsafe_fn_name", "$USER_SAF"),

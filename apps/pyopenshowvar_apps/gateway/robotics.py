@@ -94,6 +94,7 @@ class TaskNodes:
     current_state_id: ua.NodeId
     last_transition: ua.NodeId
     last_transition_id: ua.NodeId
+    last_transition_reason: ua.NodeId
 
 
 @dataclass
@@ -380,6 +381,7 @@ class RobotBuilder:
                 self._id(f"{sm}.CurrentState.Id"),
                 self._id(f"{sm}.LastTransition"),
                 self._id(f"{sm}.LastTransition.Id"),
+                self._id(f"{sm}.LastTransitionReason"),
             )
         params = self._id(f"{path}.ParameterSet")
         nodes.connected = await self._variable(

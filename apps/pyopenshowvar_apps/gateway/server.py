@@ -25,6 +25,7 @@ from typing import Self
 from urllib.parse import urlsplit
 
 from asyncua import Server, ua
+from asyncua.common.connection import TransportLimits
 
 from .cell import CellConfig
 from .model import GATEWAY_URI, Instantiator, load_nodesets
@@ -36,6 +37,8 @@ from .writes import WRITE_METHOD, add_write_method
 __all__ = ["Gateway"]
 
 log = logging.getLogger(__name__)
+
+_MAX_MESSAGE = 16 * 1024 * 1024
 
 
 class Gateway:
@@ -74,6 +77,11 @@ class Gateway:
         server.product_uri = "urn:pyopenshowvar:kvp-gateway"
         server.manufacturer_name = "pyopenshowvar"
         server.allow_remote_admin(False)
+        # asyncua accepts 100 MB messages by default; a SCADA's requests and our answers are
+        # far below 16 MB, and a client must not make us buffer more
+        server.limits = TransportLimits(
+            max_chunk_count=_MAX_MESSAGE // 65535 + 1, max_message_size=_MAX_MESSAGE
+        )
         server.set_endpoint(f"opc.tcp://{_url_host(cell.host)}:{cell.port}")
         await self._security(server)
 
