@@ -172,3 +172,23 @@ def test_interpreter_states_map_onto_the_task_control_state_machine(
     state: str, expected: str
 ) -> None:
     assert task_state(parse_value(state)) == expected
+
+
+def test_the_server_certificate_is_generated_once_and_renewed_when_the_cell_changes(
+    tmp_path: Path,
+) -> None:
+    pytest.importorskip("asyncua")
+    from cryptography import x509
+
+    from pyopenshowvar_apps.gateway.security import ensure_certificate
+
+    cert, key, first = ensure_certificate(tmp_path, "urn:cell:a", "127.0.0.1")
+    assert key.stat().st_mode & 0o077 == 0  # the private key is its owner's only
+    assert ensure_certificate(tmp_path, "urn:cell:a", "127.0.0.1")[2] == first
+    san = x509.load_der_x509_certificate(cert.read_bytes()).extensions
+    names = san.get_extension_for_class(x509.SubjectAlternativeName).value
+    assert names.get_values_for_type(x509.UniformResourceIdentifier) == ["urn:cell:a"]
+    assert [str(ip) for ip in names.get_values_for_type(x509.IPAddress)] == ["127.0.0.1"]
+    key_before = key.read_bytes()
+    assert ensure_certificate(tmp_path, "urn:cell:b", "127.0.0.1")[2] != first  # renamed cell
+    assert key.read_bytes() == key_before  # same key, new certificate

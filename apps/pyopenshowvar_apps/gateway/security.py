@@ -12,6 +12,7 @@ from __future__ import annotations
 import base64
 import hashlib
 import hmac
+import ipaddress
 import logging
 import os
 import secrets
@@ -133,7 +134,8 @@ def ensure_certificate(pki_dir: Path, app_uri: str, host: str) -> tuple[Path, Pa
         fd = os.open(key_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
         with os.fdopen(fd, "wb") as f:
             f.write(cert_gen.dump_private_key_as_pem(key))
-    names = {host, socket.gethostname()}
+    # a wildcard bind (0.0.0.0, ::) is no name a client connects to: the host name is
+    names = {socket.gethostname()} | ({host} if host not in ("0.0.0.0", "::", "") else set())
     cert = None
     if cert_path.is_file():
         cert = x509.load_der_x509_certificate(cert_path.read_bytes())
@@ -141,7 +143,7 @@ def ensure_certificate(pki_dir: Path, app_uri: str, host: str) -> tuple[Path, Pa
             cert = None
     if cert is None:
         alt: list[x509.GeneralName] = [x509.UniformResourceIdentifier(app_uri)]
-        alt += [x509.DNSName(n) for n in sorted(names) if n]
+        alt += [_general_name(n) for n in sorted(names) if n]
         cert = cert_gen.generate_self_signed_app_certificate(
             key,
             "pyopenshowvar kvp gateway",
@@ -156,6 +158,16 @@ def ensure_certificate(pki_dir: Path, app_uri: str, host: str) -> tuple[Path, Pa
     return cert_path, key_path, fingerprint
 
 
+def _general_name(name: str) -> Any:
+    """An IP address as an iPAddress entry, anything else as a dNSName (RFC 5280)."""
+    from cryptography import x509
+
+    try:
+        return x509.IPAddress(ipaddress.ip_address(name))
+    except ValueError:
+        return x509.DNSName(name)
+
+
 def _covers(cert: Any, app_uri: str, names: set[str]) -> bool:
     from cryptography import x509
 
@@ -164,5 +176,6 @@ def _covers(cert: Any, app_uri: str, names: set[str]) -> bool:
     except x509.ExtensionNotFound:
         return False
     uris = set(san.get_values_for_type(x509.UniformResourceIdentifier))
-    dns = set(san.get_values_for_type(x509.DNSName))
-    return app_uri in uris and {n for n in names if n} <= dns
+    have = set(san.get_values_for_type(x509.DNSName))
+    have |= {str(ip) for ip in san.get_values_for_type(x509.IPAddress)}
+    return app_uri in uris and {n for n in names if n} <= have
