@@ -179,7 +179,6 @@ def test_the_server_certificate_is_generated_once_and_renewed_when_the_cell_chan
 ) -> None:
     pytest.importorskip("asyncua")
     from cryptography import x509
-
     from pyopenshowvar_apps.gateway.security import ensure_certificate
 
     cert, key, first = ensure_certificate(tmp_path, "urn:cell:a", "127.0.0.1")
