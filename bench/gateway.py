@@ -4,8 +4,8 @@
     .venv/bin/python bench/gateway.py --robots 50 --seconds 60
     .venv/bin/python bench/gateway.py --quick          # 2 robots, 2 s (smoke test)
 
-Three processes: the emulated robots (bench/_cell_emus.py, all N in one process, animated so
-every poll reads new axis values), the gateway (the real ``kvp gateway cell.toml`` command) and
+Three kinds of process: the emulated robots (bench/_cell_emus.py, 10 per process, animated
+so every poll reads new axis values), the gateway (the real ``kvp gateway cell.toml`` command) and
 this script, an asyncua client that subscribes to A1's ActualPosition of every robot
 (publishing interval ``--publish-ms``, queue 10 so no sample is merged away). CPU is the
 gateway process's own user+system time over the measuring window, as % of one core. Latency
@@ -108,20 +108,37 @@ async def _measure(
     }
 
 
-def run(robots: int, seconds: float, hz: float, publish_ms: float) -> tuple[dict[str, Any], float]:
-    emus = subprocess.Popen(
-        [sys.executable, str(CELL_EMUS), str(robots)],
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        text=True,
-        cwd=ROOT,
-    )
-    assert emus.stdout is not None and emus.stdin is not None
-    line = emus.stdout.readline().split()
-    if not line or line[0] != "ports":
-        emus.kill()
-        raise RuntimeError(f"emulators did not start: {line}")
-    ports = [int(p) for p in line[1:]]
+def _start_emulators(
+    robots: int, per_process: int
+) -> tuple[list[subprocess.Popen[str]], list[int]]:
+    """The robots in processes of ``per_process`` each (the OS shares CPU per process, and the
+    benchmark must measure the gateway, not wait for starved emulators)."""
+    procs: list[subprocess.Popen[str]] = []
+    ports: list[int] = []
+    remaining = robots
+    while remaining > 0:
+        n = min(per_process, remaining)
+        remaining -= n
+        proc = subprocess.Popen(
+            [sys.executable, str(CELL_EMUS), str(n)],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=ROOT,
+        )  # fmt: skip
+        procs.append(proc)
+    for proc in procs:
+        assert proc.stdout is not None
+        line = proc.stdout.readline().split()
+        if not line or line[0] != "ports":
+            for p in procs:
+                p.kill()
+            raise RuntimeError(f"emulators did not start: {line}")
+        ports += [int(p) for p in line[1:]]
+    return procs, ports
+
+
+def run(
+    robots: int, seconds: float, hz: float, publish_ms: float, per_process: int
+) -> tuple[dict[str, Any], float]:
+    emus, ports = _start_emulators(robots, per_process)
     with tempfile.TemporaryDirectory() as tmp:
         cell = _cell_file(Path(tmp), ports, hz)
         started = time.monotonic()
@@ -149,8 +166,10 @@ def run(robots: int, seconds: float, hz: float, publish_ms: float) -> tuple[dict
         finally:
             gw.terminate()
             gw.wait(20)
-            emus.stdin.close()
-            emus.wait(20)
+            for emu in emus:
+                assert emu.stdin is not None
+                emu.stdin.close()
+                emu.wait(20)
     return result, startup
 
 
@@ -168,7 +187,7 @@ def main() -> None:
     rows: list[Row] = []
     extra: dict[str, Any] = {"machine": machine_info(), "publish_ms": args.publish_ms}
     for n in sizes:
-        r, startup = run(n, seconds, args.hz, args.publish_ms)
+        r, startup = run(n, seconds, args.hz, args.publish_ms, args.robots_per_process)
         extra[f"n{n}"] = r
         note = f"{r['samples']} updates from {r['robots_seen']}/{n} robots, {r['bad']} Bad"
         rows += [
