@@ -181,6 +181,9 @@ def main() -> None:
     ap.add_argument(
         "--publish-ms", type=float, default=100.0, help="subscription publishing interval"
     )
+    ap.add_argument(
+        "--robots-per-process", type=int, default=10, help="emulated robots per process"
+    )
     args = ap.parse_args()
     sizes = args.robots or ([2] if args.quick else [10, 50])
     seconds = 2.0 if args.quick else args.seconds

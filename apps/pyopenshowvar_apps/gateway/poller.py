@@ -137,6 +137,9 @@ class RobotPoller:
                         "robot %s (%s:%d): %s", self.cfg.name, self.cfg.host, self.cfg.port, exc
                     )
                 self.last_error = str(exc) or type(exc).__name__
+            except Exception as exc:  # a bug must not leave a robot's nodes Good and frozen
+                log.exception("robot %s: poller failed; reconnecting", self.cfg.name)
+                self.last_error = repr(exc)
             finally:
                 await self._disconnect()
             if self._stop.is_set():
