@@ -26,8 +26,20 @@ import numpy as np
 from kukavarproxy_emu import Emulator, EmulatorConfig
 from pyopenshowvar.krl import E6Axis
 
+#: ``--snapshot``: the STRUC an SPS would fill on a real KRC (issue 11's snapshot groups); the
+#: animator writes its AX member like the motion variables, the rest stays constant.
+SNAPSHOT_DAT = """DEFDAT $CONFIG
+STRUC GWSNAP_T E6AXIS AX, INT OV, BOOL DR, BOOL AS, BOOL US, BOOL SM
+DECL GWSNAP_T GW_SNAP={AX {A1 0.0, A2 -90.0, A3 90.0, A4 0.0, A5 0.0, A6 0.0, E1 0.0, E2 0.0, E3 0.0, E4 0.0, E5 0.0, E6 0.0}, OV 100, DR TRUE, AS TRUE, US TRUE, SM FALSE}
+ENDDAT
+"""
+SNAPSHOT_MEMBERS = {
+    "$AXIS_ACT": "AX", "$OV_PRO": "OV", "$DRIVES_ON": "DR", "$ALARM_STOP": "AS",
+    "$USER_SAF": "US", "$STOPMESS": "SM",
+}  # fmt: skip
 
-async def _animate(emus: list[Emulator], hz: float) -> None:
+
+async def _animate(emus: list[Emulator], hz: float, snapshot: bool) -> None:
     period = 1.0 / hz
     due = time.monotonic()
     zeros = [0.0] * 6
@@ -44,7 +56,8 @@ async def _animate(emus: list[Emulator], hz: float) -> None:
                 40 * math.sin(phase * 1.1),
             ]
             store = emu.store
-            store.set_system("$AXIS_ACT", E6Axis.from_numpy(np.array(q + zeros)))
+            axes = E6Axis.from_numpy(np.array(q + zeros))
+            store.set_system("GW_SNAP.AX" if snapshot else "$AXIS_ACT", axes)
             store.set_system("$VEL_AXIS_ACT", [10 * math.cos(phase + k) for k in range(6)] + zeros)
             store.set_system(
                 "$TORQUE_AXIS_ACT", [5 * math.sin(phase + k) for k in range(6)] + zeros
@@ -59,16 +72,26 @@ async def main(argv: list[str]) -> None:
     ap.add_argument("robots", type=int)
     ap.add_argument("--animate-hz", type=float, default=12.0)
     ap.add_argument("--motion", action="store_true", help="real motion kernel (joint_path)")
+    ap.add_argument("--snapshot", action="store_true", help="declare and animate GW_SNAP")
     args = ap.parse_args(argv)
     common = {"port": 0, "max_clients": 0, "idle_timeout": 0.0, "discovery": False}
     emus = [
-        Emulator(EmulatorConfig(robot=args.motion, program="joint_path", **common))  # type: ignore[arg-type]
+        Emulator(
+            EmulatorConfig(
+                robot=args.motion,
+                program="joint_path",
+                dat_text=SNAPSHOT_DAT if args.snapshot else None,
+                **common,  # type: ignore[arg-type]
+            )
+        )
         for _ in range(args.robots)
     ]
     for emu in emus:
         await emu.start()
     print("ports", *(emu.port for emu in emus), flush=True)
-    animator = None if args.motion else asyncio.create_task(_animate(emus, args.animate_hz))
+    animator = (
+        None if args.motion else asyncio.create_task(_animate(emus, args.animate_hz, args.snapshot))
+    )
     if animator is not None:  # a failing animator must not pass silently as "robots at rest"
         animator.add_done_callback(lambda t: t.cancelled() or (t.exception() and sys.exit(1)))
     loop = asyncio.get_running_loop()

@@ -29,6 +29,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from _cell_emus import SNAPSHOT_MEMBERS
 from _common import ROOT, Row, base_parser, machine_info, percentile, print_rows, write_json
 
 CELL_EMUS = Path(__file__).resolve().with_name("_cell_emus.py")
@@ -39,12 +40,15 @@ def _cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def _cell_file(folder: Path, ports: list[int], hz: float) -> Path:
+def _cell_file(folder: Path, ports: list[int], hz: float, snapshot: bool) -> Path:
     lines = ['[cell]\nname = "bench"\nendpoint = "opc.tcp://127.0.0.1:0"\n']
+    members = ", ".join(f'"{k}" = "{v}"' for k, v in SNAPSHOT_MEMBERS.items())
     for i, port in enumerate(ports, 1):
         lines.append(
             f'[[robot]]\nname = "r{i}"\nhost = "127.0.0.1"\nport = {port}\npoll_hz = {hz}\n'
         )
+        if snapshot:
+            lines.append(f'[[robot.snapshot]]\nvariable = "GW_SNAP"\nmembers = {{ {members} }}\n')
     path = folder / "cell.toml"
     path.write_text("\n".join(lines))
     return path
@@ -109,7 +113,7 @@ async def _measure(
 
 
 def _start_emulators(
-    robots: int, per_process: int
+    robots: int, per_process: int, snapshot: bool
 ) -> tuple[list[subprocess.Popen[str]], list[int]]:
     """The robots in processes of ``per_process`` each (the OS shares CPU per process, and the
     benchmark must measure the gateway, not wait for starved emulators)."""
@@ -120,7 +124,7 @@ def _start_emulators(
         n = min(per_process, remaining)
         remaining -= n
         proc = subprocess.Popen(
-            [sys.executable, str(CELL_EMUS), str(n)],
+            [sys.executable, str(CELL_EMUS), str(n), *(["--snapshot"] if snapshot else [])],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=ROOT,
         )  # fmt: skip
         procs.append(proc)
@@ -136,11 +140,11 @@ def _start_emulators(
 
 
 def run(
-    robots: int, seconds: float, hz: float, publish_ms: float, per_process: int
+    robots: int, seconds: float, hz: float, publish_ms: float, per_process: int, snapshot: bool
 ) -> tuple[dict[str, Any], float]:
-    emus, ports = _start_emulators(robots, per_process)
+    emus, ports = _start_emulators(robots, per_process, snapshot)
     with tempfile.TemporaryDirectory() as tmp:
-        cell = _cell_file(Path(tmp), ports, hz)
+        cell = _cell_file(Path(tmp), ports, hz, snapshot)
         started = time.monotonic()
         gw = subprocess.Popen(
             [
@@ -182,6 +186,11 @@ def main() -> None:
         "--publish-ms", type=float, default=100.0, help="subscription publishing interval"
     )
     ap.add_argument(
+        "--snapshot",
+        action="store_true",
+        help="a snapshot group: $AXIS_ACT and five scalars in one STRUC read (issue 11)",
+    )
+    ap.add_argument(
         "--robots-per-process", type=int, default=10, help="emulated robots per process"
     )
     args = ap.parse_args()
@@ -189,13 +198,16 @@ def main() -> None:
     seconds = 2.0 if args.quick else args.seconds
     rows: list[Row] = []
     extra: dict[str, Any] = {"machine": machine_info(), "publish_ms": args.publish_ms}
+    mode = ", snapshot group" if args.snapshot else ""
     for n in sizes:
-        r, startup = run(n, seconds, args.hz, args.publish_ms, args.robots_per_process)
+        r, startup = run(
+            n, seconds, args.hz, args.publish_ms, args.robots_per_process, args.snapshot
+        )
         extra[f"n{n}"] = r
         note = f"{r['samples']} updates from {r['robots_seen']}/{n} robots, {r['bad']} Bad"
         rows += [
             Row(
-                f"gateway CPU, {n} robots at {args.hz:g} Hz",
+                f"gateway CPU, {n} robots at {args.hz:g} Hz{mode}",
                 r["cpu_pct"],
                 "%",
                 target=("ours", "<=", 50.0),
