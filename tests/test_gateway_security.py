@@ -30,7 +30,7 @@ from kukavarproxy_emu import Emulator, EmulatorConfig
 CLIENT_URI = "urn:pyopenshowvar:test-client"
 
 
-def _client_certificate(folder: Path) -> tuple[Path, Path]:
+def _client_certificate(folder: Path, name: str = "client") -> tuple[Path, Path]:
     key = cert_gen.generate_private_key()
     cert = cert_gen.generate_self_signed_app_certificate(
         key,
@@ -39,7 +39,7 @@ def _client_certificate(folder: Path) -> tuple[Path, Path]:
         [cert_gen.x509.UniformResourceIdentifier(CLIENT_URI)],
         extended=[ExtendedKeyUsageOID.CLIENT_AUTH],
     )
-    cert_path, key_path = folder / "client-cert.der", folder / "client-key.pem"
+    cert_path, key_path = folder / f"{name}-cert.der", folder / f"{name}-key.pem"
     cert_path.write_bytes(cert.public_bytes(serialization.Encoding.DER))
     key_path.write_bytes(cert_gen.dump_private_key_as_pem(key))
     return cert_path, key_path
@@ -64,12 +64,20 @@ async def _secure_client(
 
 @pytest.mark.timeout(120)
 async def test_secured_gateway_refuses_anonymous_and_unencrypted_clients(tmp_path: Path) -> None:
-    async with Emulator(EmulatorConfig(port=0, discovery=False, idle_timeout=0, plant="ideal")) as emu:
+    async with Emulator(
+        EmulatorConfig(port=0, discovery=False, idle_timeout=0, plant="ideal")
+    ) as emu:
         secret = "correct horse battery"
+        # only this client's certificate is trusted (security.trusted_clients)
+        trusted = tmp_path / "trusted"
+        trusted.mkdir()
+        cert, key = _client_certificate(tmp_path)
+        (trusted / cert.name).write_bytes(cert.read_bytes())
+        stranger_cert, stranger_key = _client_certificate(tmp_path, "stranger")
         cell = tmp_path / "cell.toml"
         cell.write_text(
             '[cell]\nname = "secure"\nendpoint = "opc.tcp://127.0.0.1:0"\n'
-            "[security]\n"
+            '[security]\ntrusted_clients = "trusted"\n'
             f'users = [{{ name = "scada", password_hash = "{hash_password(secret, iterations=10_000)}" }}]\n'
             f'[[robot]]\nname = "r1"\nhost = "127.0.0.1"\nport = {emu.port}\n'
         )
@@ -103,14 +111,20 @@ async def test_secured_gateway_refuses_anonymous_and_unencrypted_clients(tmp_pat
             tokens = {t.TokenType for e in endpoints for t in e.UserIdentityTokens}
             assert tokens == {ua.UserTokenType.UserName}
 
-            cert, key = _client_certificate(tmp_path)
-            # 2. encrypted but anonymous, 3. encrypted with a wrong password: refused
-            for user, password in ((None, None), ("scada", "wrong password"), ("nobody", secret)):
-                client = await _secure_client(url, cert, key, user, password)
+            # 2. encrypted but anonymous, 3. a wrong password or user, 4. the right password
+            # from a client whose certificate is not trusted: all refused
+            attempts = [
+                (cert, key, None, None),
+                (cert, key, "scada", "wrong password"),
+                (cert, key, "nobody", secret),
+                (stranger_cert, stranger_key, "scada", secret),
+            ]
+            for c, k, user, password in attempts:
+                client = await _secure_client(url, c, k, user, password)
                 with pytest.raises((ua.UaError, OSError, TimeoutError)):
                     await client.connect()
                     await client.disconnect()  # pragma: no cover - only if it got in
-            # 4. encrypted with the right user and password: in, and the robot is there
+            # 5. the trusted client with the right user and password: in, and the robot is there
             client = await _secure_client(url, cert, key, "scada", secret)
             async with client:
                 ours = await client.get_namespace_index(GATEWAY_URI)

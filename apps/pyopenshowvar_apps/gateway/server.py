@@ -141,11 +141,18 @@ class Gateway:
         server.set_identity_tokens([ua.UserNameIdentityToken])
         if sec.trusted_clients is not None:
             from asyncua.crypto.truststore import TrustStore
-            from asyncua.crypto.validator import CertificateValidator
+            from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
 
             store = TrustStore([sec.trusted_clients], [])
             await store.load()
-            server.set_certificate_validator(CertificateValidator(trust_store=store))
+            # time range and application URI as usual, plus: in the trust store (the default
+            # options check no trust at all)
+            opts = (
+                CertificateValidatorOptions.BASIC_VALIDATION
+                | CertificateValidatorOptions.TRUSTED
+                | CertificateValidatorOptions.PEER_CLIENT
+            )
+            server.set_certificate_validator(CertificateValidator(opts, trust_store=store))
         log.info("server certificate %s, SHA-256 %s", cert, self.fingerprint)
 
     def _bound_port(self, server: Server) -> None:
