@@ -14,6 +14,7 @@ A TOML file (docs/gateway.md has a full example)::
     host = "192.168.1.10"                       # port 7000, poll_hz 10 by default
     variables = ["$OV_JOG", "MYAXIS"]           # extra variables, read-only
     writable = ["$OV_PRO"]                      # may be written through the WriteVariable method
+    allow_motion_writes = true                  # $OV_PRO is a motion variable: say so
 
 Everything is validated here, before a socket is opened: a typo is an error that names the key,
 never a silently ignored option. Relative paths are relative to the cell file.
