@@ -191,3 +191,14 @@ def test_the_server_certificate_is_generated_once_and_renewed_when_the_cell_chan
     key_before = key.read_bytes()
     assert ensure_certificate(tmp_path, "urn:cell:b", "127.0.0.1")[2] != first  # renamed cell
     assert key.read_bytes() == key_before  # same key, new certificate
+
+
+def test_the_cell_file_in_docs_gateway_md_is_valid() -> None:
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "gateway.md").read_text()
+    text = doc.split("```toml\n", 1)[1].split("```", 1)[0]
+    text = text.replace("pbkdf2-sha256$200000$...$...", hash_password("pw", iterations=10_000))
+    import tomllib
+
+    c = parse_cell(tomllib.loads(text))
+    assert c.security.enabled and [r.name for r in c.robots] == ["r1", "r2"]
+    assert c.robots[0].snapshots[0].variable == "GW_SNAP"
