@@ -24,7 +24,7 @@ from typing import Any, NoReturn
 
 from .errors import KvpConnectionError, KvpError, KvpStalledError, KvpTimeoutError, ProtocolError
 from .link import LinkBase
-from .protocol import Reply
+from .protocol import FIRST_EXTENDED, Reply
 from .session import Pending, new_reply
 
 __all__ = ["BlockingConnection"]
@@ -131,7 +131,7 @@ class BlockingConnection(LinkBase[_Outcome]):
             size = len(data)
             if size >= 10 and data[:2] == frame[:2]:
                 msg_id, length, mode, n = _HEAD.unpack_from(data)
-                if length + 4 == size and n + 10 == size:
+                if length + 4 == size and n + 10 == size and mode < FIRST_EXTENDED:
                     now = time.perf_counter()
                     try:
                         if value_only and n and mode == 0 == frame[4] and data[-1] == 1:

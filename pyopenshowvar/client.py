@@ -21,6 +21,7 @@ from collections.abc import Coroutine, Iterable, Sequence
 from types import TracebackType
 from typing import Any, TypeVar
 
+from .c3.api import C3Methods
 from .connection import Connection
 from .core import ClientCore, ReadResult
 from .errors import KvpError, KvpStalledError
@@ -34,7 +35,7 @@ log = logging.getLogger(__name__)
 T = TypeVar("T")
 
 
-class Client(RobotHelpers, ClientCore):
+class Client(C3Methods, RobotHelpers, ClientCore):
     """An asyncio KUKAVARPROXY client. Use ``async with Client(host) as kvp:``.
 
     ``timeout`` is the default for every call (each method takes ``timeout=`` to override).
@@ -42,7 +43,9 @@ class Client(RobotHelpers, ClientCore):
     found stalled; calls in flight when it was lost fail (a write is never resent, so it is
     never applied twice). See :class:`~pyopenshowvar.connection.Connection` for
     ``max_in_flight``, ``pipeline_bytes`` and ``keepalive``, and :mod:`pyopenshowvar.session`
-    for ``id_policy``.
+    for ``id_policy``. The C3 Bridge methods (``read_multiple``, ``program_start``,
+    ``file_write``, ...) come from :class:`~pyopenshowvar.c3.api.C3Methods` and refuse, before
+    sending, what the server does not offer (docs/c3bridge.md).
     """
 
     _conn: Connection | None = None

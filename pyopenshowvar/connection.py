@@ -33,7 +33,7 @@ from typing import Any
 
 from .errors import KvpConnectionError, KvpError, KvpStalledError, KvpTimeoutError, ProtocolError
 from .link import LinkBase
-from .protocol import Reply, encode_read, encode_write
+from .protocol import FIRST_EXTENDED, Reply, encode_read, encode_write
 from .session import IdPolicy, Pending, new_reply
 
 __all__ = ["Connection", "IdPolicy"]
@@ -318,7 +318,8 @@ class Connection(LinkBase[_Fut]):
             size = len(data)
             if size >= 10 and not self._decoder.buffered:
                 msg_id, length, mode, n = _HEAD.unpack_from(data)
-                if length + 4 == size and n + 10 == size:  # one whole reply: the common case
+                # one whole KVP reply: the common case (C3 types >= 4 carry raw payloads)
+                if length + 4 == size and n + 10 == size and mode < FIRST_EXTENDED:
                     replies = [new_reply(msg_id, mode, data[7:-3], data[-1], data[-3:-1])]
                 else:
                     replies = self._decoder.feed_replies(data)

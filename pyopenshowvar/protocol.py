@@ -11,6 +11,11 @@ L = 5 + N + M. Success is decided from the last byte only (KVP answers ``00 01 0
 C3 Bridge ``00 00 00``). An unknown mode byte makes KVP answer a bare 4-byte ``id 00 00``;
 :class:`Reply` represents that with ``mode=None``.
 
+Types 4 and up are C3 Bridge messages (:mod:`pyopenshowvar.c3`): the same header and the same
+3-byte footer (error code u16 + success flag), but a payload whose layout depends on the type.
+For them :attr:`Reply.value` / :attr:`Request.value` hold the raw payload (no length prefix),
+which :mod:`pyopenshowvar.c3` encodes and decodes.
+
 Text is latin-1 (KVP converts through the Windows ANSI code page; names and KRL literals are
 ASCII in practice). Both length bytes are honoured, so names and values of 256..65535 bytes
 work — several peers mask the high byte.
@@ -27,6 +32,7 @@ from .errors import ProtocolError
 
 __all__ = [
     "ENCODING",
+    "FIRST_EXTENDED",
     "HEADER_SIZE",
     "MAX_FRAME",
     "MAX_ID",
@@ -59,6 +65,8 @@ _U16 = struct.Struct(">H")
 _HEAD = struct.Struct(">HHBH")
 #: KVP's status block: a 2-byte length (= 1) followed by the status byte.
 STATUS_BLOCK = b"\x00\x01"
+#: The first C3 Bridge message type: replies of this type and above carry a raw payload.
+FIRST_EXTENDED = 4
 
 
 class Mode(IntEnum):
@@ -198,6 +206,11 @@ def encode_write_array(msg_id: int, name: str | bytes, words: Iterable[int]) -> 
 
 
 def encode_request(request: Request) -> bytes:
+    """Encode a request; C3 Bridge types (4 and up) send ``value`` as their raw payload."""
+    if request.mode >= FIRST_EXTENDED:
+        if not request.mode <= 255:
+            raise ProtocolError(f"message type {request.mode} is not one byte")
+        return _frame(request.msg_id, bytes((request.mode,)) + (request.value or b""))
     body = bytes((request.mode,)) + _block(_text(request.name, "name"), "name")
     if request.value is not None:
         body += _block(request.value, "value")
@@ -209,7 +222,7 @@ def encode_reply(reply: Reply) -> bytes:
     mode, value, code, status = reply.mode, reply.value, reply.code, reply.status
     if (
         mode is not None
-        and 0 <= mode <= 255
+        and 0 <= mode < FIRST_EXTENDED
         and 0 <= reply.msg_id <= MAX_ID
         and len(value) <= MAX_CONTENT - 6
         and len(code) == 2
@@ -223,9 +236,11 @@ def encode_reply(reply: Reply) -> bytes:
         )
     if reply.mode is None:
         return _frame(reply.msg_id, b"")
-    if len(reply.code) != 2 or not 0 <= reply.status <= 255:
-        raise ProtocolError("reply code must be 2 bytes and status one byte")
-    body = bytes((reply.mode,)) + _block(reply.value, "value") + reply.code + bytes((reply.status,))
+    if len(reply.code) != 2 or not 0 <= reply.status <= 255 or not 0 <= reply.mode <= 255:
+        raise ProtocolError("reply mode and status must be one byte each and code 2 bytes")
+    # C3 Bridge types carry their payload as it is; KVP's modes wrap the value in a block
+    payload = reply.value if reply.mode >= FIRST_EXTENDED else _block(reply.value, "value")
+    body = bytes((reply.mode,)) + payload + reply.code + bytes((reply.status,))
     return _frame(reply.msg_id, body)
 
 
@@ -258,8 +273,8 @@ def decode_request(frame: bytes | bytearray | memoryview) -> Request:
     """Decode one whole request frame (header included).
 
     Modes 0..3 are checked block by block and the inner lengths must add up to L exactly.
-    Unknown modes decode to a Request with that mode, an empty name and the raw body as value,
-    so a server can answer them the way KVP does.
+    Other types decode to a Request with that type, an empty name and the raw payload as value:
+    KVP answers them as unknown modes, C3 Bridge decodes them (:mod:`pyopenshowvar.c3`).
     """
     if type(frame) is bytes and len(frame) >= 7:
         # fast path for a well-formed read (the emulator's hot loop); all else is checked below
@@ -282,16 +297,24 @@ def decode_request(frame: bytes | bytearray | memoryview) -> Request:
 
 
 def decode_reply(frame: bytes | bytearray | memoryview) -> Reply:
-    """Decode one whole reply frame (header included)."""
+    """Decode one whole reply frame (header included).
+
+    Modes 0..3 must be KVP's ``V | value | 00 01 | status`` exactly; C3 Bridge types (4 and up)
+    give ``value`` = the raw payload between the type byte and the 3-byte footer.
+    """
     size = len(frame)
     if type(frame) is bytes and size >= 10:
         # fast path for a well-formed reply (the client's hot loop); all else is checked below
         msg_id, length, mode, n = _HEAD.unpack_from(frame)
-        if length == size - HEADER_SIZE and n + 10 == size:
+        if length == size - HEADER_SIZE and n + 10 == size and mode < FIRST_EXTENDED:
             return Reply(msg_id, mode, frame[7 : 7 + n], frame[-1], frame[-3:-1])
     msg_id, body = _split(frame)
     if not body:
         return Reply(msg_id, None, b"", 0, b"")
+    if body[0] >= FIRST_EXTENDED:
+        if len(body) < 4:
+            raise ProtocolError(f"C3 reply content of {len(body)} bytes has no 3-byte footer")
+        return Reply(msg_id, body[0], bytes(body[1:-3]), body[-1], bytes(body[-3:-1]))
     if len(body) < 6:
         raise ProtocolError(f"reply content of {len(body)} bytes is shorter than the minimum 6")
     value, pos = _take_block(body, 1, "value")

@@ -38,7 +38,7 @@ from collections import deque
 from typing import Generic, Literal, TypeVar
 
 from .errors import ProtocolError
-from .protocol import MAX_ID, Mode, Reply, encode_read
+from .protocol import FIRST_EXTENDED, MAX_ID, Mode, Reply, encode_read
 
 __all__ = ["IdPolicy", "Pending", "Session"]
 
@@ -184,8 +184,12 @@ class Session(Generic[W]):
         self.window = min(self.pipeline_bytes, max(1, mss))
 
     def check_size(self, name: str, frame: bytes) -> None:
-        """Refuse a request KVP would cut (larger than one of its reads), before sending."""
-        if len(frame) > self.pipeline_bytes:
+        """Refuse a request KVP would cut (larger than one of its reads), before sending.
+
+        C3 Bridge messages (types >= 4) are exempt: C3 Bridge collects each request whole
+        (``Client::onCollect``), and they are only sent once the server is known to be one.
+        """
+        if len(frame) > self.pipeline_bytes and frame[4] < FIRST_EXTENDED:
             raise ProtocolError(
                 f"request for {name!r} is {len(frame)} bytes; KUKAVARPROXY reads at most "
                 f"{self.pipeline_bytes} per socket event and would cut it (see pipeline_bytes)"

@@ -26,6 +26,7 @@ from types import TracebackType
 from typing import Any
 
 from .blocking import BlockingConnection
+from .c3.api import SyncC3Methods
 from .core import ClientCore, ReadResult
 from .errors import KvpError, KvpStalledError
 from .krl import KrlValue
@@ -37,7 +38,7 @@ __all__ = ["Client", "ReadResult", "connect"]
 log = logging.getLogger(__name__)
 
 
-class Client(SyncRobotHelpers, ClientCore):
+class Client(SyncC3Methods, SyncRobotHelpers, ClientCore):
     """A blocking KUKAVARPROXY client. Use ``with Client(host) as kvp:``.
 
     Arguments are those of the asyncio :class:`pyopenshowvar.Client`: ``timeout`` is the
