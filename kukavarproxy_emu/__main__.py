@@ -20,6 +20,7 @@ from .config import (
     DEFAULT_PORT,
     DEFAULT_UDP_PORT,
     KNOWN_QUIRKS,
+    PROXIES,
     ROBOT_PROGRAMS,
     WIRES,
     EmulatorConfig,
@@ -37,16 +38,25 @@ log = logging.getLogger("kukavarproxy_emu")
 def build_parser(prog: str = "kukavarproxy-emu") -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog=prog,
-        description="KUKAVARPROXY 9.0 emulator (TCP 7000 protocol, UDP 6999 discovery).",
+        description="KUKAVARPROXY 9.0 (or C3 Bridge 1.4) emulator (TCP 7000 protocol, UDP 6999"
+        " discovery).",
     )
     net = parser.add_argument_group("network")
     net.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     net.add_argument(
         "--port", type=int, default=DEFAULT_PORT, help="TCP port (default 7000, 0 = ephemeral)"
     )
-    net.add_argument("--max-clients", type=int, default=10, help="0 = unlimited (default 10)")
     net.add_argument(
-        "--idle-timeout", type=float, default=30.0, help="seconds, 0 = never (default 30)"
+        "--max-clients",
+        type=int,
+        default=-1,
+        help="0 = unlimited (default 10; 64 with --proxy c3bridge)",
+    )
+    net.add_argument(
+        "--idle-timeout",
+        type=float,
+        default=-1.0,
+        help="seconds, 0 = never (default 30; never with --proxy c3bridge)",
     )
     net.add_argument("--udp-port", type=int, default=DEFAULT_UDP_PORT, help="discovery port")
     net.add_argument(
@@ -76,6 +86,13 @@ def build_parser(prog: str = "kukavarproxy-emu") -> argparse.ArgumentParser:
     )
     beh.add_argument("--seed", type=int, default=None, help="seed of the latency sampler")
     beh.add_argument(
+        "--proxy",
+        default="kvp",
+        choices=PROXIES,
+        help="kvp (default): KUKAVARPROXY 9.0; c3bridge: C3 Bridge 1.4, its extended messages"
+        " (read many, program control, files, ...) on the same robot, see docs/c3bridge.md",
+    )
+    beh.add_argument(
         "--strict", action="store_true", help="C3 Bridge style failures (tail 00 00 00)"
     )
     beh.add_argument(
@@ -102,10 +119,11 @@ def build_parser(prog: str = "kukavarproxy-emu") -> argparse.ArgumentParser:
     rob = parser.add_argument_group("simulated robot")
     rob.add_argument(
         "--program",
-        default="follow",
+        default="",
         metavar="NAME|PROG.src",
         help=f"robot program: a KRL .src file (its .dat beside it is loaded) or a shipped one,"
-        f" {' | '.join(ROBOT_PROGRAMS)} (default follow: LOOP PTP MYAXIS C_PTP)",
+        f" {' | '.join(ROBOT_PROGRAMS)} (default follow: LOOP PTP MYAXIS C_PTP; none with"
+        " --proxy c3bridge)",
     )
     rob.add_argument(
         "--sps",
@@ -182,6 +200,7 @@ def config_from_args(args: argparse.Namespace) -> EmulatorConfig:
         strict=args.strict,
         quirks=quirks,
         wire=args.wire,
+        proxy=args.proxy,
         udp_port=args.udp_port,
         udp_reply_port=args.udp_reply_port,
         discovery=args.discovery,

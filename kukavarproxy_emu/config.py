@@ -16,7 +16,15 @@ from .faults import Fault
 from .latency import LatencyProfile, resolve_profile
 from .plant import PLANTS, Obstacle
 
-__all__ = ["DEFAULT_PORT", "KNOWN_QUIRKS", "ROBOT_PROGRAMS", "WIRES", "EmulatorConfig"]
+__all__ = [
+    "DEFAULT_PORT",
+    "KNOWN_QUIRKS",
+    "PROXIES",
+    "PROXY_LIMITS",
+    "ROBOT_PROGRAMS",
+    "WIRES",
+    "EmulatorConfig",
+]
 
 DEFAULT_PORT = 7000
 DEFAULT_UDP_PORT = 6999
@@ -27,6 +35,12 @@ KNOWN_QUIRKS = frozenset({"legacy-ids", "no-ping"})
 #: ``kvp9``: every read of at most 2048 bytes is parsed on its own, exactly as KUKAVARPROXY 9.0's
 #: source does, malformed input included (docs/emulator.md, "Wire-faithful mode").
 WIRES = ("robust", "kvp9")
+#: ``kvp``: KUKAVARPROXY 9.0. ``c3bridge``: the C3 Bridge Interface server 1.4 (KVP's modes 0/1
+#: with C3's failure tail, plus the extended messages: docs/c3bridge.md).
+PROXIES = ("kvp", "c3bridge")
+#: (max_clients, idle_timeout) when not given: KVP's 10 clients and 30 s; C3 Bridge has no
+#: limits, the emulator keeps 64 clients to bound its memory and drops no idle client.
+PROXY_LIMITS = {"kvp": (10, 30.0), "c3bridge": (64, 0.0)}
 #: ``--program`` names of the shipped KRL programs (kept here so the config does not import
 #: numpy-heavy motion code; ``kukavarproxy_emu.motion.PROGRAMS`` has the same keys, a test
 #: checks it). Any other ``--program`` is the path of a ``.src`` file.
@@ -51,10 +65,12 @@ class EmulatorConfig:
     dat_text: str | None = None
     #: "none", "kvp", "thesis", "fixed:SECONDS" or a LatencyProfile.
     latency: str | LatencyProfile = "none"
-    #: Clients beyond this are accepted and closed at once (KVP: 10); 0 = unlimited.
-    max_clients: int = 10
-    #: Seconds without received data before a client is dropped (KVP 9.0: 30); 0 = never.
-    idle_timeout: float = 30.0
+    #: Clients beyond this are accepted and closed at once (KVP: 10); 0 = unlimited;
+    #: -1 = the proxy's default (PROXY_LIMITS).
+    max_clients: int = -1
+    #: Seconds without received data before a client is dropped (KVP 9.0: 30); 0 = never;
+    #: -1 = the proxy's default.
+    idle_timeout: float = -1.0
     #: Seed of the latency sampler (None: a fresh seed each run).
     seed: int | None = None
     #: C3 Bridge style failures (tail 00 00 00, empty value) for unknown reads and refused writes.
@@ -62,6 +78,8 @@ class EmulatorConfig:
     quirks: frozenset[str] = frozenset()
     #: How the byte stream is framed and parsed: "robust" or "kvp9" (see WIRES).
     wire: str = "robust"
+    #: Which server to be: "kvp" or "c3bridge" (see PROXIES).
+    proxy: str = "kvp"
     #: UDP discovery: listen port, the port answers go to (0: the sender's port) and the switch
     #: (None: on unless the TCP port is ephemeral).
     udp_port: int = DEFAULT_UDP_PORT
@@ -74,8 +92,10 @@ class EmulatorConfig:
     max_pending: int = 128
     #: Simulate the robot (motion kernel + program + SPS); False = static variables only.
     robot: bool = True
-    #: Robot program: a shipped name (see docs/emulator-robot.md) or a ``.src`` path (docs/krl.md).
-    program: str = "follow"
+    #: Robot program: a shipped name (see docs/emulator-robot.md) or a ``.src`` path (docs/krl.md);
+    #: "" = the proxy's default: ``follow`` for KVP, ``none`` for C3 Bridge (whose clients
+    #: select and start their own programs).
+    program: str = ""
     #: Submit (SPS) program: ``"sps"`` (the shipped Algorithm 4.11), a ``.sub``/``.src`` path,
     #: or ``"none"``.
     sps: str = "sps"
@@ -103,11 +123,19 @@ class EmulatorConfig:
             raise ValueError("ports must be in 0..65535")
         if not 0 <= self.udp_reply_port <= 0xFFFF:
             raise ValueError("udp_reply_port must be in 0..65535")
+        if self.proxy not in PROXIES:
+            raise ValueError(f"unknown proxy {self.proxy!r} (choose from {', '.join(PROXIES)})")
+        clients, idle = PROXY_LIMITS[self.proxy]
+        if self.max_clients == -1:
+            object.__setattr__(self, "max_clients", clients)
+        if self.idle_timeout == -1:
+            object.__setattr__(self, "idle_timeout", idle)
         if self.max_clients < 0 or self.idle_timeout < 0:
             raise ValueError("max_clients and idle_timeout must be >= 0")
         if self.max_pending < 1 or self.max_frame < 8:
             raise ValueError("max_pending must be >= 1 and max_frame >= 8")
-        object.__setattr__(self, "program", str(self.program))
+        program = str(self.program) or ("none" if self.proxy == "c3bridge" else "follow")
+        object.__setattr__(self, "program", program)
         object.__setattr__(self, "sps", str(self.sps))
         if not _is_program(self.program):
             raise ValueError(
@@ -133,9 +161,16 @@ class EmulatorConfig:
         object.__setattr__(self, "quirks", frozenset(self.quirks))
         if self.wire not in WIRES:
             raise ValueError(f"unknown wire {self.wire!r} (choose from {', '.join(WIRES)})")
-        if self.wire == "kvp9" and self.strict:
+        if self.wire == "kvp9" and (self.strict or self.proxy == "c3bridge"):
             # strict is C3 Bridge's failure tail; C3 Bridge frames like the robust mode
-            raise ValueError("--strict (C3 Bridge failures) cannot be combined with --wire kvp9")
+            raise ValueError(
+                "--strict / --proxy c3bridge cannot be combined with --wire kvp9 (C3 Bridge"
+                " collects whole messages, like the robust wire)"
+            )
+        if self.proxy == "c3bridge":
+            if self.quirks:
+                raise ValueError("--quirks reproduce KUKAVARPROXY bugs; C3 Bridge has none")
+            object.__setattr__(self, "strict", True)  # C3's failure tail on types 0/1
         object.__setattr__(self, "config_files", tuple(Path(p) for p in self.config_files))
         resolve_profile(self.latency)  # fail early on a bad profile name
 

@@ -83,6 +83,10 @@ class Responder:
             return "write"
         return None
 
+    def weight(self, request: Request) -> int:
+        """Service times one request costs (one CrossComm call per KVP request)."""
+        return 1
+
     def answer(self, request: Request, msg_id: int) -> Reply:
         mode = request.mode
         if mode == Mode.READ:

@@ -163,9 +163,9 @@ class Scheduler:
         self.rng = rng
         self.free_at = -math.inf
 
-    def reserve(self, kind: Kind, arrival: float) -> float:
+    def reserve(self, kind: Kind, arrival: float, weight: int = 1) -> float:
         start = max(arrival, self.free_at)
-        self.free_at = start + self.profile.sample(kind, self.rng)
+        self.free_at = start + sum(self.profile.sample(kind, self.rng) for _ in range(weight))
         return self.free_at
 
     def answered(self, deadline: float, now: float) -> None:
@@ -271,8 +271,13 @@ class ServiceQueue:
         self.scheduler = Scheduler(profile, rng)
         self.served = 0
 
-    async def run(self, kind: Kind, compute: Callable[[], T]) -> T:
-        deadline = self.scheduler.reserve(kind, time.monotonic())
+    async def run(self, kind: Kind, compute: Callable[[], T], weight: int = 1) -> T:
+        """Answer with ``compute()`` after ``weight`` sampled service times of ``kind``.
+
+        ``weight`` > 1 is a request the controller serves with that many CrossComm calls in a
+        row (a C3 Bridge read-multiple of N variables).
+        """
+        deadline = self.scheduler.reserve(kind, time.monotonic(), weight)
         await TIMER.wait_until(deadline)
         self.scheduler.answered(deadline, time.monotonic())
         self.served += 1

@@ -53,6 +53,7 @@ from .store import VariableStore
 if TYPE_CHECKING:
     from collections.abc import Callable
 
+    from .c3 import C3Server
     from .kvp9_connection import Kvp9Connection
     from .motion import Robot
 
@@ -108,6 +109,8 @@ class _Connection(asyncio.BufferedProtocol):
         self.index = 0
         self.peer = "?"
         self.decoder = RequestDecoder(max_frame=emu.config.max_frame)
+        #: Answers this connection's requests (C3 Bridge: one per connection, its file buffers).
+        self.responder = emu.new_responder()
         self.queue: deque[_Item] = deque()
         self.worker: asyncio.Task[None] | None = None
         self.received = 0
@@ -195,7 +198,7 @@ class _Connection(asyncio.BufferedProtocol):
         # Pre-9.0 bug: every reply to one TCP read carried the first request's id.
         legacy_id = _U16.unpack_from(frames[0])[0] if emu.legacy_ids else None
         if self.worker is None and not emu.slow:
-            answer = emu.responder.answer
+            answer = self.responder.answer
             out: list[bytes] = []
             try:
                 for frame in frames:
@@ -237,12 +240,13 @@ class _Connection(asyncio.BufferedProtocol):
                     transport.close()
                     return
                 request, msg_id, nth = item
-                kind = emu.responder.kind(request)
+                responder = self.responder
+                kind = responder.kind(request)
                 if emu.service is not None and kind is not None:
-                    compute = partial(emu.responder.answer, request, msg_id)
-                    reply = await emu.service.run(kind, compute)
+                    compute = partial(responder.answer, request, msg_id)
+                    reply = await emu.service.run(kind, compute, responder.weight(request))
                 else:
-                    reply = emu.responder.answer(request, msg_id)
+                    reply = responder.answer(request, msg_id)
                 frame = encode_reply(reply)
                 emu.stats.requests += 1
                 faults = emu.faults.match(self.index, nth) if emu.faults else []
@@ -256,6 +260,10 @@ class _Connection(asyncio.BufferedProtocol):
                     await self._drained
         except asyncio.CancelledError:
             raise
+        except ProtocolError as exc:  # C3 Bridge: a message type it does not handle
+            self.emu.stats.protocol_errors += 1
+            log.warning("client %d (%s): %s; closing", self.index, self.peer, exc)
+            transport.close()
         except Exception:
             log.exception("client %d (%s): internal error, closing", self.index, self.peer)
             transport.abort()
@@ -334,9 +342,22 @@ class Emulator:
         self._last_index = 0
         self._idle_task: asyncio.Task[None] | None = None
         self._discovery: asyncio.DatagramTransport | None = None
+        #: C3 Bridge's standard discovery listener (UDP on the TCP port), if any.
+        self._c3_standard: asyncio.DatagramTransport | None = None
+        self.udp_standard_port: int | None = None
         #: The simulated robot (motion kernel, program, IPO clock) while started with
         #: ``config.robot``; None otherwise.
         self.robot: Robot | None = None
+        #: The C3 Bridge state (file system, program control) with ``proxy="c3bridge"``.
+        self.c3: C3Server | None = None
+        if self.config.proxy == "c3bridge":
+            from .c3 import C3Server  # late: only C3 emulators need it
+
+            self.c3 = C3Server(self.store, None, address=self.config.host, port=self.port)
+
+    def new_responder(self) -> Responder:
+        """The responder of a new connection: the shared one, or a C3 Bridge session."""
+        return self.c3.session() if self.c3 is not None else self.responder
 
     @property
     def slow(self) -> bool:
@@ -362,6 +383,8 @@ class Emulator:
             lambda: factory(self), self.config.host, self.config.port, reuse_address=True
         )
         self.host, self.port = self._server.sockets[0].getsockname()[:2]
+        if self.c3 is not None:
+            self.c3.port = self.port
         if self.config.idle_timeout > 0:
             self._idle_task = loop.create_task(self._watch_idle())
         if self.config.discovery_enabled:
@@ -372,6 +395,8 @@ class Emulator:
             except BaseException:  # KRL syntax error, missing program file: do not leak the port
                 await self.close()
                 raise
+            if self.c3 is not None:
+                self.c3.control.robot = self.robot
         log.info("KUKAVARPROXY emulator listening on %s:%d", self.host, self.port)
         return self
 
@@ -395,6 +420,9 @@ class Emulator:
         self.robot.start()
 
     async def _start_discovery(self) -> None:
+        if self.c3 is not None:
+            await self._start_c3_discovery(self.c3)
+            return
         try:
             transport, _ = await start_discovery(
                 self.config.host, self.config.udp_port, self.config.udp_reply_port, self.identity
@@ -404,6 +432,27 @@ class Emulator:
             return
         self._discovery = transport
         self.udp_port = transport.get_extra_info("sockname")[1]
+
+    async def _start_c3_discovery(self, c3: C3Server) -> None:
+        """C3 Bridge listens twice: legacy (like KVP) and standard (UDP on the TCP port,
+        answering the sender's port); both also answer ``@PROXY_*`` queries."""
+        from .c3.discovery import start_c3_discovery
+
+        cfg = self.config
+        for port, reply in ((cfg.udp_port, cfg.udp_reply_port), (self.port, 0)):
+            try:
+                transport, _ = await start_c3_discovery(
+                    cfg.host, port, reply, self.identity, c3.internal
+                )
+            except OSError as exc:
+                log.warning("UDP discovery on port %d unavailable: %s", port, exc)
+                continue
+            if self._discovery is None:
+                self._discovery = transport
+                self.udp_port = transport.get_extra_info("sockname")[1]
+            else:
+                self._c3_standard = transport
+                self.udp_standard_port = transport.get_extra_info("sockname")[1]
 
     def identity(self) -> tuple[str, str]:
         """(model, serial) as announced by discovery: ``$MODEL_NAME[]`` unquoted, ``$KR_SERIALNO``."""
@@ -424,6 +473,9 @@ class Emulator:
         if self._discovery is not None:
             self._discovery.close()
             self._discovery = None
+        if self._c3_standard is not None:
+            self._c3_standard.close()
+            self._c3_standard = None
         for conn in list(self._connections.values()):
             conn.close()
         await asyncio.sleep(0)

@@ -162,6 +162,9 @@ class MotionKernel(Publisher):
         self.time = 0.0  # simulated seconds since start
         self.ticks = 0
         self.rate = 1.0  # profile clock rate = effective override
+        #: A program stop: the rate ramps to 0 like an override of 0, so the robot brakes on
+        #: its path and the same motion resumes when the hold is released.
+        self.hold = False
         self.active: list[Segment] = []  # running; two while blending
         self.pending: deque[Segment] = deque()  # planned by the advance run, not started
         self.planned_q = q0.copy()  # end of the last planned motion (base of *_REL)
@@ -428,7 +431,7 @@ class MotionKernel(Publisher):
         """Advance one IPO cycle and publish the new state to the store."""
         dt = self.ipo
         ov = self.store.get("$OV_PRO")
-        target = float(ov) / 100.0  # type: ignore[arg-type]
+        target = 0.0 if self.hold else float(ov) / 100.0  # type: ignore[arg-type]
         self.rate = self._slew(target, dt) if self.active else target
         q_old = self.q
         self._advance(dt * self.rate)
