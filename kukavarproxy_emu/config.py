@@ -125,19 +125,13 @@ class EmulatorConfig:
             raise ValueError("udp_reply_port must be in 0..65535")
         if self.proxy not in PROXIES:
             raise ValueError(f"unknown proxy {self.proxy!r} (choose from {', '.join(PROXIES)})")
-        clients, idle = PROXY_LIMITS[self.proxy]
-        if self.max_clients == -1:
-            object.__setattr__(self, "max_clients", clients)
-        if self.idle_timeout == -1:
-            object.__setattr__(self, "idle_timeout", idle)
-        if self.max_clients < 0 or self.idle_timeout < 0:
+        if self.client_limit < 0 or self.idle_limit < 0:
             raise ValueError("max_clients and idle_timeout must be >= 0")
         if self.max_pending < 1 or self.max_frame < 8:
             raise ValueError("max_pending must be >= 1 and max_frame >= 8")
-        program = str(self.program) or ("none" if self.proxy == "c3bridge" else "follow")
-        object.__setattr__(self, "program", program)
+        object.__setattr__(self, "program", str(self.program))
         object.__setattr__(self, "sps", str(self.sps))
-        if not _is_program(self.program):
+        if not _is_program(self.robot_program):
             raise ValueError(
                 f"unknown program {self.program!r} (known: {', '.join(ROBOT_PROGRAMS)},"
                 " or a .src file)"
@@ -173,6 +167,23 @@ class EmulatorConfig:
             object.__setattr__(self, "strict", True)  # C3's failure tail on types 0/1
         object.__setattr__(self, "config_files", tuple(Path(p) for p in self.config_files))
         resolve_profile(self.latency)  # fail early on a bad profile name
+
+    # The proxy-dependent defaults are resolved on use, not stored, so that
+    # ``dataclasses.replace(config, proxy="c3bridge")`` gets C3 Bridge's defaults.
+    @property
+    def client_limit(self) -> int:
+        """``max_clients`` with -1 resolved to the proxy's default."""
+        return PROXY_LIMITS[self.proxy][0] if self.max_clients == -1 else self.max_clients
+
+    @property
+    def idle_limit(self) -> float:
+        """``idle_timeout`` with -1 resolved to the proxy's default."""
+        return PROXY_LIMITS[self.proxy][1] if self.idle_timeout == -1 else self.idle_timeout
+
+    @property
+    def robot_program(self) -> str:
+        """``program`` with "" resolved: ``follow`` for KVP, ``none`` for C3 Bridge."""
+        return self.program or ("none" if self.proxy == "c3bridge" else "follow")
 
     @property
     def latency_profile(self) -> LatencyProfile | None:

@@ -385,7 +385,7 @@ class Emulator:
         self.host, self.port = self._server.sockets[0].getsockname()[:2]
         if self.c3 is not None:
             self.c3.port = self.port
-        if self.config.idle_timeout > 0:
+        if self.config.idle_limit > 0:
             self._idle_task = loop.create_task(self._watch_idle())
         if self.config.discovery_enabled:
             await self._start_discovery()
@@ -406,7 +406,7 @@ class Emulator:
         cfg = self.config
         self.robot = Robot(
             self.store,
-            program=cfg.program,
+            program=cfg.robot_program,
             sps=cfg.sps,
             ipo=cfg.ipo,
             speed=cfg.speed,
@@ -508,7 +508,7 @@ class Emulator:
     # -- bookkeeping used by _Connection -------------------------------------------------
 
     def _admit(self, conn: _Connection | Kvp9Connection) -> bool:
-        limit = self.config.max_clients
+        limit = self.config.client_limit
         if self._server is None or (limit and len(self._connections) >= limit):
             self.stats.rejected += 1
             log.info("refusing %s: %d clients connected", conn.peer, len(self._connections))
@@ -526,7 +526,7 @@ class Emulator:
 
     async def _watch_idle(self) -> None:
         # KVP checks once a second; a finer tick keeps short test timeouts accurate.
-        timeout = self.config.idle_timeout
+        timeout = self.config.idle_limit
         interval = min(1.0, timeout / 4)
         while True:
             await asyncio.sleep(interval)

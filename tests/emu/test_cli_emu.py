@@ -91,13 +91,18 @@ def test_parse_all_options() -> None:
 
 def test_defaults() -> None:
     config = config_from_args(build_parser().parse_args([]))
-    assert (config.host, config.port, config.max_clients, config.idle_timeout) == (
+    assert (config.host, config.port, config.client_limit, config.idle_limit) == (
         "127.0.0.1",
         7000,
         10,
         30.0,
     )
     assert config.discovery_enabled and config.latency_profile is None
+    assert config.robot_program == "follow"
+    c3 = config_from_args(build_parser().parse_args(["--proxy", "c3bridge"]))
+    # C3 Bridge has no client or idle limits; the emulator keeps 64 clients, and no program
+    # runs until a client selects one
+    assert (c3.client_limit, c3.idle_limit, c3.robot_program, c3.strict) == (64, 0.0, "none", True)
 
 
 @pytest.mark.parametrize(
