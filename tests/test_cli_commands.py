@@ -9,7 +9,12 @@ from typer.main import get_command
 
 
 def _names(a: typer.Typer) -> list[str]:
-    return [c.name or "" for c in a.registered_commands]
+    """Commands and command groups (``kvp program start``: the group ``program``)."""
+    groups = [
+        g.name or (g.typer_instance.info.name if g.typer_instance else "") or ""
+        for g in a.registered_groups
+    ]
+    return [c.name or "" for c in a.registered_commands] + groups
 
 
 def test_every_group_module_registers_commands_in_order() -> None:
@@ -25,6 +30,9 @@ def test_every_group_module_registers_commands_in_order() -> None:
     assert len(seen) == len(set(seen)), "two groups register the same command name"
     fresh = typer.Typer()
     register_all(fresh)
-    assert _names(fresh) == seen == _names(app)
-    assert {"read", "write", "watch", "repl", "monitor", "emu"} <= set(seen)
+    # commands keep the modules' order; groups (typer lists them after the commands) too
+    assert set(_names(fresh)) == set(seen) == set(_names(app))
+    commands = [c.name for c in fresh.registered_commands]
+    assert commands == [n for n in seen if n in commands]
+    assert {"read", "write", "watch", "repl", "monitor", "emu", "program", "files"} <= set(seen)
     assert set(get_command(app).list_commands(None)) == set(seen)  # type: ignore[attr-defined,arg-type]

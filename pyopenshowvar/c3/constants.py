@@ -87,7 +87,7 @@ class ErrorCode(IntEnum):
 
 
 _ERROR_TEXT = {
-    ErrorCode.GENERAL: "unspecified error (E_FAIL): unknown variable, refused value or state",
+    ErrorCode.GENERAL: "unspecified failure (E_FAIL)",
     ErrorCode.SUCCESS: "success",
     ErrorCode.ACCESS: "access denied",
     ErrorCode.ARGUMENT: "invalid argument",

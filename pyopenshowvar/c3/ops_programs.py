@@ -15,7 +15,7 @@ from typing import Any
 
 from ..core import Op
 from ..errors import KvpError, ProtocolError
-from .constants import Command, CopyFlag, Interpreter, ProgramCommand
+from .constants import Command, CopyFlag, ErrorCode, Interpreter, ProgramCommand
 from .errors import C3CommandError, RequestTooLargeError
 from .files import (
     FileCopy,
@@ -220,7 +220,15 @@ def _simple(client: Any, message: Any, what: str, timeout: float | None) -> Op[A
     encode(message)
     yield from guard(client, message.TYPE, what.split(" ")[0], timeout)
     out = yield from exchange(client, message, what, timeout)
-    return check(client, out, what)
+    return check(client, out, what, _FILE_HINTS.get(out.code, ""))
+
+
+#: What a file error code usually means on a controller.
+_FILE_HINTS: dict[int, str] = {
+    ErrorCode.ARGUMENT: "not a valid path on the controller (KRC:\\...)",
+    ErrorCode.ACCESS: "read-only, or part of the selected program",
+    ErrorCode.MEMORY: "too large for the controller's storage",
+}
 
 
 def file_list(
@@ -234,28 +242,28 @@ def file_list(
 ) -> Op[NameList]:
     """Names (and info strings) of the items in a directory (#21)."""
     message = FileNameList(path, item_type, flags | (1 if recursive else 0))
-    out = yield from _simple(client, message, f"file_list {path}", timeout)
+    out = yield from _simple(client, message, f"file_list of {path}", timeout)
     listing: NameList = _parse(client, out, NameList, "#21")
     return listing
 
 
 def file_properties(client: Any, name: str, *, timeout: float | None = None) -> Op[Properties]:
     """Type, size, attributes, times and edit mode of one item (#26)."""
-    out = yield from _simple(client, FileGetProperties(name), f"file_properties {name}", timeout)
+    out = yield from _simple(client, FileGetProperties(name), f"file_properties of {name}", timeout)
     props: Properties = _parse(client, out, Properties, "#26")
     return props
 
 
 def file_full_name(client: Any, path: str, *, timeout: float | None = None) -> Op[str]:
     """``/R1/TEST.SRC`` → ``KRC:\\R1\\PROGRAM\\TEST.SRC`` (#27)."""
-    out = yield from _simple(client, FileGetFullName(path), f"file_full_name {path}", timeout)
+    out = yield from _simple(client, FileGetFullName(path), f"file_full_name of {path}", timeout)
     value: str = _parse(client, out, Value, "#27").value
     return value
 
 
 def file_krc_name(client: Any, path: str, *, timeout: float | None = None) -> Op[str]:
     """``KRC:\\R1\\PROGRAM\\TEST.SRC`` → ``/R1/TEST.SRC`` (#28)."""
-    out = yield from _simple(client, FileGetKrcName(path), f"file_krc_name {path}", timeout)
+    out = yield from _simple(client, FileGetKrcName(path), f"file_krc_name of {path}", timeout)
     value: str = _parse(client, out, Value, "#28").value
     return value
 
@@ -264,7 +272,7 @@ def file_delete(
     client: Any, name: str, *, always: bool = False, timeout: float | None = None
 ) -> Op[None]:
     """Delete a file (#23); ``always`` deletes a read-only one too."""
-    yield from _simple(client, FileDelete(name, always), f"file_delete {name}", timeout)
+    yield from _simple(client, FileDelete(name, always), f"file_delete of {name}", timeout)
 
 
 def file_create(
@@ -279,7 +287,7 @@ def file_create(
 ) -> Op[None]:
     """Create an empty file, module or directory (#22)."""
     message = FileCreate(name, item_type, module_part, always, template)
-    yield from _simple(client, message, f"file_create {name}", timeout)
+    yield from _simple(client, message, f"file_create of {name}", timeout)
 
 
 def file_copy(
@@ -287,7 +295,7 @@ def file_copy(
 ) -> Op[None]:
     """Copy a file (#24); ``flags`` are :class:`CopyFlag` (e.g. ``OVERWRITE``)."""
     message = FileCopy(source, destination, flags)
-    yield from _simple(client, message, f"file_copy {source}", timeout)
+    yield from _simple(client, message, f"file_copy of {source}", timeout)
 
 
 def file_move(
@@ -295,7 +303,7 @@ def file_move(
 ) -> Op[None]:
     """Move or rename a file (#25)."""
     message = FileMove(source, destination, flags)
-    yield from _simple(client, message, f"file_move {source}", timeout)
+    yield from _simple(client, message, f"file_move of {source}", timeout)
 
 
 def file_set_attribute(
@@ -303,7 +311,7 @@ def file_set_attribute(
 ) -> Op[None]:
     """Set the attributes under ``mask`` to ``attributes`` (#20), e.g. READ_ONLY."""
     message = FileSetAttribute(name, attributes, mask)
-    yield from _simple(client, message, f"file_set_attribute {name}", timeout)
+    yield from _simple(client, message, f"file_set_attribute of {name}", timeout)
 
 
 def file_write(
@@ -323,7 +331,9 @@ def file_write(
     yield from guard(client, Command.FILE_WRITE_CONTENT, "file_write", timeout)
     what = f"upload of {name}"
     out = yield from exchange(client, FileWriteBegin(len(data)), what, timeout)
-    size: IoSize = _parse(client, check(client, out, what), IoSize, "#29 begin")
+    size: IoSize = _parse(
+        client, check(client, out, what, _FILE_HINTS.get(out.code, "")), IoSize, "#29 begin"
+    )
     if size.size != len(data):
         raise C3CommandError(
             what, out.code, endpoint=client.endpoint,
@@ -342,7 +352,7 @@ def file_write(
             )  # fmt: skip
         offset += len(piece)
     out = yield from exchange(client, end, what, timeout)
-    check(client, out, what, "the server kept the data but could not store the file")
+    check(client, out, what, _FILE_HINTS.get(out.code, ""))
     return len(data)
 
 
@@ -355,7 +365,9 @@ def file_read(
     yield from guard(client, Command.FILE_READ_CONTENT, "file_read", timeout)
     what = f"download of {name}"
     out = yield from exchange(client, begin, what, timeout)
-    size: IoSize = _parse(client, check(client, out, what), IoSize, "#30 begin")
+    size: IoSize = _parse(
+        client, check(client, out, what, _FILE_HINTS.get(out.code, "")), IoSize, "#30 begin"
+    )
     try:
         data = yield from _download(client, name, size.size, max_size, what, timeout)
     except GeneratorExit:  # the caller was cancelled: nothing more may be sent from here
