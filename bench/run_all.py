@@ -36,6 +36,7 @@ SCRIPTS = [
     ("Motion kernel", "motion_kss.py"),
     ("Web jog pad", "web_jog.py"),
     ("Gateway", "gateway.py"),
+    ("C3 Bridge", "c3.py"),
 ]
 
 

@@ -29,6 +29,7 @@ BENCH = Path(__file__).resolve().parents[1] / "bench"
         ("latency_pacing.py", "paced"),
         ("motion_kss.py", "A2 reversal"),
         ("web_jog.py", "jog stop latency after release"),
+        ("c3.py", "upload-to-motion"),
     ],
 )
 def test_benchmark_runs_quick(script: str, expect: str) -> None:
