@@ -208,3 +208,53 @@ def test_the_async_and_the_blocking_mixin_offer_the_same_methods() -> None:
 
     assert public(C3Methods) == public(SyncC3Methods)
     assert {"read_multiple", "program_start", "file_write", "program_state"} <= public(C3Methods)
+
+
+async def test_both_clients_keep_a_c3_payload_that_looks_like_a_kvp_reply() -> None:
+    """``05 | 00 00 | 00 01 01`` is #5's echo of an empty value — and also exactly the shape
+    of a KVP reply with an empty value. The fast paths of both clients must hand C3 types the
+    raw payload (``00 00``), not KVP's value (``b""``)."""
+    from pyopenshowvar.c3.messages import WriteVariable
+    from pyopenshowvar.c3.replies import Outcome, Value
+    from pyopenshowvar.protocol import RequestDecoder
+    from pyopenshowvar.sync import Client as SyncClient
+
+    async def serve(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        decoder = RequestDecoder()
+        while data := await reader.read(4096):
+            for frame in decoder.feed(data):
+                writer.write(frame[:2] + bytes.fromhex("0006 05 0000 0001 01"))
+
+    server = await asyncio.start_server(serve, "127.0.0.1", 0)
+    port = server.sockets[0].getsockname()[1]
+    frame = WriteVariable("MYSTRING[]", "").frame(0)
+    async with server, Client("127.0.0.1", port, id_policy="strict", keepalive=None) as kvp:
+        reply = await kvp._request("MYSTRING[]", frame, 1.0)
+        assert Value.parse(Outcome.of(reply).reader()) == Value("")
+
+    def blocking() -> bytes:
+        with SyncClient("127.0.0.1", port, id_policy="strict", keepalive=None) as sync:
+            return sync._request("MYSTRING[]", frame, 1.0).value
+
+    async with await asyncio.start_server(serve, "127.0.0.1", port):
+        assert await asyncio.to_thread(blocking) == b"\x00\x00"
+
+
+def test_the_blocking_client_runs_the_same_c3_operations() -> None:
+    from dataclasses import replace
+
+    from kukavarproxy_emu import EmulatorThread
+    from kukavarproxy_emu.testing import TEST_CONFIG
+    from pyopenshowvar.sync import Client as SyncClient
+
+    config = replace(TEST_CONFIG, proxy="c3bridge", plant="ideal", speed=8.0)
+    with EmulatorThread(config) as emu, SyncClient(emu.host, emu.port) as kvp:
+        assert kvp.server_info().describe() == "C3 Bridge 1.4 (OPEN SOURCE)"
+        assert kvp.read_multiple(["$OV_PRO", "PING"])["PING"].text == "PONG"
+        path = kvp.program_upload(SRC, "pick.src", DAT)
+        kvp.program_select(path)
+        with pytest.raises(MotionNotAllowedError):
+            kvp.program_start()
+        kvp.program_start(allow_motion=True)
+        assert kvp.program_state().state in ("P_ACTIVE", "P_END")
+        assert kvp.file_read(path) == SRC
