@@ -136,10 +136,17 @@ async def test_upload_select_start_moves_stop_resume_reset(c3: Emulator) -> None
         await wait_for(moved)
         await kvp.program_stop()
         assert (await kvp.program_state()).state == "P_STOP"
-        await asyncio.sleep(0.25)  # braking on the path, then standing
+
+        async def standing() -> bool:  # braking on the path, then standing still
+            first = await axes(kvp)
+            await asyncio.sleep(0.05)
+            return await axes(kvp) == first
+
+        await wait_for(standing)
         held = await axes(kvp)
         await asyncio.sleep(0.1)
         assert await axes(kvp) == held
+        assert (await kvp.program_state()).state == "P_STOP"
         await kvp.program_start(allow_motion=True)  # resume: the same motion goes on
 
         async def ended() -> bool:

@@ -151,7 +151,7 @@ async def test_read_multiple_is_one_interpolation_cycle(emulator_factory: Emulat
     from pyopenshowvar.kinematics import KR6R900SIXX, forward
     from pyopenshowvar.krl import parse_value
 
-    emu = await emulator_factory(plant="ideal", proxy="c3bridge", speed=4)
+    emu = await emulator_factory(plant="ideal", proxy="c3bridge", speed=1)
     names = ("$AXIS_ACT", "$POS_ACT", "$OV_PRO", "$AXIS_ACT")
     async with await RawClient.connect(emu.host, emu.port) as raw:
         # move the robot with a manual motion (#11) and sample while it runs
@@ -197,3 +197,33 @@ async def test_long_answers_and_wide_values(c3: Emulator) -> None:
         assert (out.code, out.payload) == (ErrorCode.LONG_ANSWER, H("00"))
         out = await outcome(raw, ReadVariable("$OUT[]").frame(2))  # one fits
         assert out.ok and len(out.payload) > 20000
+
+
+async def test_work_per_message_is_bounded(emulator_factory: EmulatorFactory) -> None:
+    """A benchmark asking for 4·10⁹ iterations does at most BENCHMARK_OPS store operations
+    (the reply says how many), a module over MAX_MODULE is not parsed, and all upload buffers
+    together stay under the budget."""
+    from kukavarproxy_emu.c3.control import MAX_MODULE
+    from kukavarproxy_emu.c3.responder import BENCHMARK_OPS
+    from pyopenshowvar.c3.messages import Benchmark, ProgramSelect
+    from pyopenshowvar.c3.replies import BenchmarkReply
+
+    emu = await emulator_factory(proxy="c3bridge", plant="ideal")
+    assert emu.c3 is not None
+    emu.c3.files.limit = 100  # all connections' upload buffers together
+    async with (
+        await RawClient.connect(emu.host, emu.port) as raw,
+        await RawClient.connect(emu.host, emu.port) as other,
+    ):
+        t0 = time.perf_counter()
+        out = await outcome(raw, Benchmark(("$OV_PRO", "$MODE_OP"), 0xFFFFFFFE).frame(1))
+        reply = BenchmarkReply.parse(out.reader())
+        assert out.ok and reply.iterations * reply.count <= BENCHMARK_OPS
+        assert time.perf_counter() - t0 < 5.0
+        assert (await outcome(raw, FileWriteBegin(80).frame(2))).ok
+        out = await outcome(other, FileWriteBegin(30).frame(3))  # 80 + 30 > 100
+        assert out.code == ErrorCode.MEMORY
+        big = b"DEF BIG()\n" + b"; padding\n" * (MAX_MODULE // 10) + b"END\n"
+        emu.c3.vfs.write("KRC:\\R1\\Program\\BIG.SRC", big, overwrite=True)
+        out = await outcome(raw, ProgramSelect("/R1/BIG").frame(4))
+        assert out.code == ErrorCode.MEMORY
