@@ -121,9 +121,14 @@ class C3Session(Responder):
     # ------------------------------------------------------------------ server hooks
 
     def kind(self, request: Request) -> Kind | None:
-        if request.mode in _FREE or (request.mode in (29, 30) and _io_op(request) != 1):
-            return None  # buffer operations, info, features: no CrossComm call
-        return "write" if request.mode in _WRITES else "read"
+        mode = request.mode
+        if mode == Command.FILE_WRITE_CONTENT:  # only storing the file calls CrossComm
+            return "write" if _io_op(request) == 4 else None
+        if mode == Command.FILE_READ_CONTENT:  # only loading the file calls CrossComm
+            return "read" if _io_op(request) == 1 else None
+        if mode in _FREE:
+            return None  # info and features: answered by the server itself
+        return "write" if mode in _WRITES else "read"
 
     def weight(self, request: Request) -> int:
         """CrossComm calls a message costs: one per variable of #6/#7 (it reads them in turn)."""
