@@ -190,6 +190,13 @@ async def test_manual_motion_and_files(c3: Emulator) -> None:
             return abs((await axes(kvp))[5] - (before[5] + 10.0)) < 1e-3
 
         await wait_for(arrived)
+        z0 = float((await kvp.read_value("$POS_ACT"))["Z"])  # type: ignore[index]
+        await kvp.motion("{Z -50}", "LIN_REL", allow_motion=True)  # planned in slices
+
+        async def lowered() -> bool:
+            return abs(float((await kvp.read_value("$POS_ACT"))["Z"]) - (z0 - 50)) < 1e-2  # type: ignore[index]
+
+        await wait_for(lowered)
         data = bytes(range(256)) * 300  # 76.8 KB: three chunks each way
         await kvp.file_write("KRC:\\R1\\blob.bin", data)
         assert await kvp.file_read("krc:/r1/BLOB.bin") == data

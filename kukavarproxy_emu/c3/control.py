@@ -25,6 +25,7 @@ for select errors (a KRL syntax error names ``file:line:column``).
 from __future__ import annotations
 
 import logging
+import time
 from typing import TYPE_CHECKING
 
 from pyopenshowvar.c3.constants import ErrorCode, Interpreter, KcpKey, MotionType, ProgramCommand
@@ -50,6 +51,8 @@ log = logging.getLogger(__name__)
 #: Largest module (``.src`` + ``.dat``) the emulator selects: parsing takes ~10 µs a byte,
 #: and selecting blocks the one thread, as it does on C3 Bridge.
 MAX_MODULE = 64 * 1024
+#: Seconds one #11 motion may spend planning (a long LIN near a singularity takes longest).
+PLAN_BUDGET = 0.25
 _NODE = ast.Name("C3", line=0, column=0)
 _MOTION_KIND = {
     MotionType.PTP: "PTP",
@@ -263,7 +266,12 @@ class RobotControl:
             if not isinstance(target, Struct):
                 raise KrlValueError(f"{position!r} is not an aggregate")
             planner = _Planner()
-            planner._plan(robot.kernel, label, target, False, f"{label} {position}", _NODE)
+            job = planner._plan(robot.kernel, label, target, False, f"{label} {position}", _NODE)
+            # A LIN is planned in slices (the interpreter spreads them over cycles); one
+            # message may hold the loop for PLAN_BUDGET at most. The job queues the motion only
+            # in its last slice, so one left unfinished leaves nothing behind.
+            if job is not None and not job.step(time.perf_counter() + PLAN_BUDGET):
+                raise MotionRefused(f"planning took longer than {PLAN_BUDGET:g} s")
         except (KrlValueError, KrlRuntimeError, MotionRefused) as exc:
             self._message(f"{label} {position}: {exc}")
             return ErrorCode.GENERAL
