@@ -19,6 +19,7 @@ from pathlib import Path
 from .config import (
     DEFAULT_PORT,
     DEFAULT_UDP_PORT,
+    IDLE_RESETS,
     KNOWN_QUIRKS,
     PROXIES,
     ROBOT_PROGRAMS,
@@ -57,6 +58,13 @@ def build_parser(prog: str = "kukavarproxy-emu") -> argparse.ArgumentParser:
         type=float,
         default=-1.0,
         help="seconds, 0 = never (default 30; never with --proxy c3bridge)",
+    )
+    net.add_argument(
+        "--idle-reset",
+        choices=IDLE_RESETS,
+        default="bytes",
+        help="what resets the idle timer: any received bytes, as KVP (default), or only whole"
+        " requests",
     )
     net.add_argument("--udp-port", type=int, default=DEFAULT_UDP_PORT, help="discovery port")
     net.add_argument(
@@ -196,6 +204,7 @@ def config_from_args(args: argparse.Namespace) -> EmulatorConfig:
         latency=args.latency,
         max_clients=args.max_clients,
         idle_timeout=args.idle_timeout,
+        idle_reset=args.idle_reset,
         seed=args.seed,
         strict=args.strict,
         quirks=quirks,

@@ -46,6 +46,8 @@ PROXY_LIMITS = {"kvp": (10, 30.0), "c3bridge": (64, 0.0)}
 #: checks it). Any other ``--program`` is the path of a ``.src`` file.
 ROBOT_PROGRAMS = ("follow", "actuator", "ext_move_axis", "joint_path", "cart_path", "none")
 _KRL_SUFFIXES = (".src", ".sub")
+#: ``idle_reset`` values: any received bytes (KVP) or whole requests only.
+IDLE_RESETS = ("bytes", "requests")
 
 
 def _is_program(value: str) -> bool:
@@ -71,6 +73,9 @@ class EmulatorConfig:
     #: Seconds without received data before a client is dropped (KVP 9.0: 30); 0 = never;
     #: -1 = the proxy's default.
     idle_timeout: float = -1.0
+    #: What resets the idle timer: ``"bytes"`` (any received data, as KVP's read event does)
+    #: or ``"requests"`` (only a whole request, so a client trickling bytes is dropped).
+    idle_reset: str = "bytes"
     #: Seed of the latency sampler (None: a fresh seed each run).
     seed: int | None = None
     #: C3 Bridge style failures (tail 00 00 00, empty value) for unknown reads and refused writes.
@@ -127,6 +132,8 @@ class EmulatorConfig:
             raise ValueError(f"unknown proxy {self.proxy!r} (choose from {', '.join(PROXIES)})")
         if self.client_limit < 0 or self.idle_limit < 0:
             raise ValueError("max_clients and idle_timeout must be >= 0")
+        if self.idle_reset not in IDLE_RESETS:
+            raise ValueError(f"idle_reset must be one of {', '.join(IDLE_RESETS)}")
         if self.max_pending < 1 or self.max_frame < 8:
             raise ValueError("max_pending must be >= 1 and max_frame >= 8")
         object.__setattr__(self, "program", str(self.program))

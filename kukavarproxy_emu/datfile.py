@@ -32,6 +32,7 @@ from pathlib import Path
 
 __all__ = [
     "Assignment",
+    "MAX_ELEMENTS",
     "DatFile",
     "DatSyntaxError",
     "Declaration",
@@ -43,6 +44,10 @@ __all__ = [
     "parse_declaration",
     "read_dat",
 ]
+
+#: Elements of one array variable at most (2**18). Bounds the memory and the time one
+#: declaration costs (a KRC's data memory holds far less); larger arrays are a syntax error.
+MAX_ELEMENTS = 1 << 18
 
 _IDENT = re.compile(r"[A-Za-z_$][A-Za-z0-9_$]*")
 _INT = re.compile(r"[+-]?[0-9]+")
@@ -198,6 +203,8 @@ class _Line:
         match = _INT.match(self.text, self.pos, self.end)
         if match is None:
             raise self.error(f"expected {what}")
+        if len(match.group()) > 18:  # int() refuses > 4300 digits; no KRL number is that long
+            raise self.error(f"{what} is too large")
         self.pos = match.end()
         return int(match.group())
 
@@ -312,11 +319,18 @@ class _Parser:
 
     def _dims(self, line: _Line) -> tuple[int, ...]:
         dims = []
+        count = 1
         while True:
             size_pos = line.mark()
             size = line.integer("an array size")
             if size < 1:
                 raise line.error("array size must be positive", size_pos)
+            count *= size
+            if count > MAX_ELEMENTS:
+                raise line.error(
+                    f"array of {count} elements exceeds the emulator's limit of {MAX_ELEMENTS}",
+                    size_pos,
+                )
             dims.append(size)
             if line.accept("]"):
                 return tuple(dims)

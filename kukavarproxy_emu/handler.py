@@ -11,6 +11,10 @@ Every value read goes through :func:`extract_variable_value`, KVP's ``ExtractVar
 ``NAME[]`` with a trailing space), and KVP trims the spaces off before they reach the wire.
 :meth:`Responder.show_var` and :meth:`Responder.set_var` are the two CrossComm calls on their
 own, for the wire-faithful ``kvp9`` connection (:mod:`kukavarproxy_emu.kvp9`).
+
+Names and values come from the network: they reach the log only escaped and clipped
+(:func:`~kukavarproxy_emu.logsafe.clip`), through a rate limiter, so no client can forge a log
+line or flood the log.
 """
 
 from __future__ import annotations
@@ -22,11 +26,14 @@ from pyopenshowvar.protocol import ENCODING, Mode, Reply, Request
 
 from .config import EmulatorConfig
 from .latency import Kind
+from .logsafe import RateLimitedLog, clip
 from .store import UnknownVariable, VariableStore, WriteRefused
 
 __all__ = ["Responder", "build_store", "extract_variable_value"]
 
 log = logging.getLogger(__name__)
+#: Every line here can be provoked by any client at will: escaped (clip) and rate-limited.
+_limited = RateLimitedLog(log)
 
 _U16 = struct.Struct(">H")
 #: A reply's value must leave room for the 6 other content bytes under the 16-bit length.
@@ -108,7 +115,9 @@ class Responder:
 
     def _reply(self, msg_id: int, mode: int, value: bytes) -> Reply:
         if len(value) > _MAX_VALUE:
-            log.warning("value of %d bytes does not fit a reply; answering failure", len(value))
+            _limited.warning(
+                "value of %d bytes does not fit a reply; answering failure", len(value)
+            )
             return self._failure(msg_id, mode)
         return Reply(msg_id, mode, value)
 
@@ -124,7 +133,7 @@ class Responder:
         except UnknownVariable:
             return None
         except Exception:  # a store bug must cost one reply, not the connection
-            log.warning("store.read(%r) failed", name, exc_info=True)
+            _limited.warning("store.read(%s) failed", clip(name), exc_info=True)
             return None
 
     def set_var(self, name: str, text: str) -> bool:
@@ -140,10 +149,11 @@ class Responder:
         try:
             self.store.write(name, text)
         except (WriteRefused, UnknownVariable) as exc:
-            log.debug("write %s=%r refused: %s", name, text, exc)
+            if log.isEnabledFor(logging.DEBUG):
+                _limited.debug("write %s=%s refused: %s", clip(name), clip(text), clip(str(exc)))
             return False
         except Exception:
-            log.warning("store.write(%r, %r) failed", name, text, exc_info=True)
+            _limited.warning("store.write(%s, %s) failed", clip(name), clip(text), exc_info=True)
             return False
         return True
 
@@ -167,11 +177,13 @@ class Responder:
         payload = request.value or b""
         if not payload or len(payload) % 2:
             return self._failure(msg_id, Mode.WRITE_ARRAY)
-        base = request.name.removesuffix("[]")
-        ok = False
-        for index, (word,) in enumerate(_U16.iter_unpack(payload), start=1):
-            # Only the last element's status survives, as in KVP.
-            ok = self._write(f"{base}[{index}]", str(word))
+        words = [word for (word,) in _U16.iter_unpack(payload)]
+        try:
+            # KVP writes NAME[1..k] one by one; only the last element's status survives.
+            ok = self.store.write_words(request.name.removesuffix("[]"), words)
+        except Exception:  # a store bug must cost one reply, not the connection
+            _limited.warning("store.write_words(%s) failed", clip(request.name), exc_info=True)
+            ok = False
         if ok:
             return Reply(msg_id, Mode.WRITE_ARRAY, b"")
         return self._failure(msg_id, Mode.WRITE_ARRAY)

@@ -17,6 +17,7 @@ from math import prod
 
 from pyopenshowvar.krl import Kind, KrlValue, TypeRegistry, TypeSpec
 
+from .datfile import MAX_ELEMENTS
 from .values import Range, Refused, member_specs
 
 __all__ = ["Var", "VarPath", "parse_name"]
@@ -35,10 +36,22 @@ class VarPath:
     members: tuple[str, ...]
 
 
-@lru_cache(maxsize=8192)
+#: Names up to this many characters are cached. A KRL identifier has at most 24 characters, so
+#: every real path (``MYE6ARRAY[512].A1``) fits; longer names, which only a client probing the
+#: server sends, are parsed each time instead of pinning their text in memory.
+CACHED_NAME_LENGTH = 96
+#: Cached names: with the length limit above the cache holds at most ~2 MB of text.
+NAME_CACHE_SIZE = 8192
+
+
 def parse_name(name: str) -> VarPath | None:
     """The path ``name`` spells, or None when it is not a variable name."""
-    # Cached: a server sees the same few names thousands of times a second.
+    if len(name) <= CACHED_NAME_LENGTH:
+        return _parse_cached(name)
+    return _parse(name)
+
+
+def _parse(name: str) -> VarPath | None:
     m = _NAME.match(name.strip().upper())
     if m is None:
         return None
@@ -57,10 +70,17 @@ def parse_name(name: str) -> VarPath | None:
     return VarPath(base, index, tuple(members[1:].split(".")) if members else ())
 
 
+# Cached: a server sees the same few names thousands of times a second.
+_parse_cached = lru_cache(maxsize=NAME_CACHE_SIZE)(_parse)
+
+
 class Var:
     """One declared variable. Arrays keep a flat row-major list; a CHAR array is one str."""
 
-    __slots__ = ("dims", "elems", "name", "ranges", "read_only", "spec", "text_len", "type_name")
+    __slots__ = (
+        "dims", "elem_text", "elems", "name", "ranges", "read_only", "spec", "text_len",
+        "type_name",
+    )  # fmt: skip
 
     def __init__(self, name: str, type_name: str, spec: TypeSpec, dims: tuple[int, ...]) -> None:
         self.name = name
@@ -71,8 +91,13 @@ class Var:
         self.ranges: Range | Mapping[str, Range] | None = None
         # A CHAR array is text (one str value); every other array holds its elements.
         self.text_len = dims[0] if spec.kind is Kind.STR and dims else 0
+        if prod(dims) > MAX_ELEMENTS:
+            raise ValueError(f"{prod(dims)} elements exceed the limit of {MAX_ELEMENTS}")
         size = prod(dims) if dims and not self.text_len else 1
         self.elems: list[KrlValue | None] = [None] * size
+        #: KRC4 text of each element for whole-array reads (None: not formatted since it
+        #: changed); allocated at the first whole-array read.
+        self.elem_text: list[str | None] | None = None
 
     @property
     def is_array(self) -> bool:

@@ -37,6 +37,7 @@ from typing import TYPE_CHECKING, Self
 
 from pyopenshowvar.errors import ProtocolError
 from pyopenshowvar.protocol import (
+    FramingError,
     Request,
     RequestDecoder,
     decode_request,
@@ -44,10 +45,11 @@ from pyopenshowvar.protocol import (
 )
 
 from .config import EmulatorConfig
-from .discovery import start_discovery
+from .discovery import DiscoveryProtocol, start_discovery
 from .faults import FaultSet, send_reply
 from .handler import Responder, build_store
 from .latency import ServiceQueue
+from .logsafe import RateLimitedLog, clip
 from .store import VariableStore
 
 if TYPE_CHECKING:
@@ -60,12 +62,26 @@ if TYPE_CHECKING:
 __all__ = ["ConnectionInfo", "Emulator", "Stats"]
 
 log = logging.getLogger(__name__)
+#: Connection lines any client can provoke at will (connect, garbage, EOF): rate-limited.
+_limited_conn = RateLimitedLog(log, burst=20)
 
 _U16 = struct.Struct(">H")
-#: Bytes read from a socket per event: bounds the work (and replies) one read can queue.
+#: Bytes read from a socket per event: bounds the requests one read can queue.
 READ_SIZE = 32 * 1024
-#: (request, id the reply carries, request number on its connection); None = close here.
+#: Reply bytes a connection may hold unsent: beyond it the connection stops answering and
+#: reading until the client has taken its replies (output backpressure). A connection's unsent
+#: output therefore never exceeds OUTPUT_LIMIT plus one reply (< 64 KiB).
+OUTPUT_LIMIT = 64 * 1024
+#: Seconds of request handling one connection gets per event-loop iteration; the rest of its
+#: batch waits for the next iteration, so other clients and the IPO clock get their turn.
+SLICE = 0.002
+#: Seconds a closing connection may take to flush its last replies before it is aborted.
+CLOSE_GRACE = 2.0
+#: Worker queue: (request, id the reply carries, request number on its connection); None =
+#: close here.
 _Item = tuple[Request, int, int] | None
+#: Fast-path backlog: (frame, legacy id or None); None = close here.
+_Frame = tuple[bytes, int | None] | None
 
 
 @dataclass
@@ -111,13 +127,21 @@ class _Connection(asyncio.BufferedProtocol):
         self.decoder = RequestDecoder(max_frame=emu.config.max_frame)
         #: Answers this connection's requests (C3 Bridge: one per connection, its file buffers).
         self.responder = emu.new_responder()
+        #: Fast path: frames of the last read not answered yet (None: close after the rest).
+        self.backlog: deque[_Frame] = deque()
+        #: Queued path: decoded requests for the worker (None: close after the rest).
         self.queue: deque[_Item] = deque()
         self.worker: asyncio.Task[None] | None = None
         self.received = 0
         self.last_rx = time.monotonic()
+        #: Closing, dropped or gone (its slot is free again).
         self.closed = False
+        #: No more input is taken (after a protocol error or EOF); what came before is answered.
+        self.input_done = False
+        self.lost = False
         self._write_paused = False
         self._reading_paused = False
+        self._scheduled = False
         self._drained: asyncio.Future[None] | None = None
         self._rbuf = memoryview(bytearray(READ_SIZE))
 
@@ -133,19 +157,23 @@ class _Connection(asyncio.BufferedProtocol):
             self.closed = True
             transport.close()
             return
+        # pause_writing() comes once OUTPUT_LIMIT reply bytes wait unsent (backpressure).
+        transport.set_write_buffer_limits(high=OUTPUT_LIMIT)
         sock = transport.get_extra_info("socket")
         if sock is not None:
             try:  # replies are small and latency-bound; never wait for Nagle
                 sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             except OSError:
                 pass
-        log.info("client %d connected from %s", self.index, self.peer)
+        _limited_conn.info("client %d connected from %s", self.index, self.peer)
 
     def connection_lost(self, exc: Exception | None) -> None:
-        self.closed = True
+        self.closed = self.lost = True
+        self.backlog.clear()
+        self.queue.clear()
         if self.index:
             self.emu._forget(self)
-            log.info("client %d (%s) disconnected", self.index, self.peer)
+            _limited_conn.info("client %d (%s) disconnected", self.index, self.peer)
         if self.worker is not None:
             self.worker.cancel()
 
@@ -153,31 +181,40 @@ class _Connection(asyncio.BufferedProtocol):
         return self._rbuf
 
     def buffer_updated(self, nbytes: int) -> None:
-        if self.closed:
+        if self.closed or self.input_done:
             return
-        self.last_rx = time.monotonic()
+        now = time.monotonic()
+        if not self.emu.idle_requests_only:
+            self.last_rx = now  # KVP: any received bytes reset the idle timer
         robot = self.emu.robot
         if robot is not None:
             robot.clock.poll()  # a due IPO tick goes before this batch (bounded jitter)
+        error: ProtocolError | None = None
         try:
             frames = self.decoder.feed(self._rbuf[:nbytes])
-            if frames:
-                self._dispatch(frames)
-        except ProtocolError as exc:
-            self._protocol_error(exc)
+        except FramingError as exc:  # answer the whole requests before the bad header
+            frames, error = exc.frames, exc
+        if frames:
+            self.last_rx = now
+        try:
+            self._dispatch(frames, error)
         except Exception:
             log.exception("client %d (%s): internal error, closing", self.index, self.peer)
             self.abort()
 
     def eof_received(self) -> bool:
         # A client that half-closes after its last request still gets every reply: keep the
-        # transport open until the worker has answered what is queued, then close.
+        # transport open until what is queued is answered, then close.
         if self.decoder.buffered:
-            log.info("client %d (%s): EOF inside a frame", self.index, self.peer)
+            _limited_conn.info("client %d (%s): EOF inside a frame", self.index, self.peer)
+        self.input_done = True
         if self.worker is not None:
             self.queue.append(None)
-            return True
-        return False
+        elif self.backlog:
+            self.backlog.append(None)
+        else:
+            self._finish()
+        return True
 
     def pause_writing(self) -> None:
         self._write_paused = True
@@ -187,57 +224,107 @@ class _Connection(asyncio.BufferedProtocol):
         self._write_paused = False
         if self._drained is not None and not self._drained.done():
             self._drained.set_result(None)
+        if self.backlog and not self._scheduled:
+            self._schedule()
         self._update_reading()
 
     # -- request handling -----------------------------------------------------------------
 
-    def _dispatch(self, frames: list[bytes]) -> None:
+    def _dispatch(self, frames: list[bytes], error: ProtocolError | None) -> None:
         emu = self.emu
-        transport = self.transport
-        assert transport is not None
         # Pre-9.0 bug: every reply to one TCP read carried the first request's id.
-        legacy_id = _U16.unpack_from(frames[0])[0] if emu.legacy_ids else None
+        legacy_id = _U16.unpack_from(frames[0])[0] if frames and emu.legacy_ids else None
+        if error is not None:
+            self._protocol_error(error)
         if self.worker is None and not emu.slow:
-            answer = self.responder.answer
-            out: list[bytes] = []
-            try:
-                for frame in frames:
-                    request = decode_request(frame)
-                    msg_id = request.msg_id if legacy_id is None else legacy_id
-                    out.append(encode_reply(answer(request, msg_id)))
-            finally:
-                # Answer the good requests before a bad one, then let the error close us.
-                if out:
-                    self.received += len(out)
-                    emu.stats.requests += len(out)
-                    transport.write(b"".join(out))
+            self.backlog.extend([(frame, legacy_id) for frame in frames])
+            if error is not None:
+                self.backlog.append(None)
+            if not self._scheduled:
+                self._serve()
             return
         for frame in frames:
             try:
                 request = decode_request(frame)
             except ProtocolError as exc:
-                self.queue.append(None)  # answer what came before, then close
-                self.closed = True
-                emu.stats.protocol_errors += 1
-                log.warning("client %d (%s): %s; closing", self.index, self.peer, exc)
+                self._protocol_error(exc)
+                error = exc
                 break
             self.received += 1
             msg_id = request.msg_id if legacy_id is None else legacy_id
             self.queue.append((request, msg_id, self.received))
+        if error is not None:
+            self.queue.append(None)  # answer what came before, then close
         self._update_reading()
-        if self.worker is None:
+        if self.worker is None and self.queue:
             self.worker = asyncio.get_running_loop().create_task(self._work())
+
+    def _serve(self) -> None:
+        """Answer backlog frames for at most ``SLICE`` seconds and until ``OUTPUT_LIMIT`` reply
+        bytes wait unsent; the rest waits for the next loop iteration or for the client to
+        read (reading stays paused meanwhile, so the backlog never grows beyond one read)."""
+        self._scheduled = False
+        transport = self.transport
+        backlog = self.backlog
+        if transport is None or self.lost or self._write_paused:
+            return
+        emu = self.emu
+        if emu.robot is not None:
+            emu.robot.clock.poll()
+        answer = self.responder.answer
+        room = OUTPUT_LIMIT - transport.get_write_buffer_size()
+        deadline = time.perf_counter() + SLICE
+        out: list[bytes] = []
+        size = 0
+        try:
+            while backlog and (size < room or not out):
+                item = backlog[0]
+                if item is None:
+                    break
+                backlog.popleft()
+                frame, legacy_id = item
+                request = decode_request(frame)
+                msg_id = request.msg_id if legacy_id is None else legacy_id
+                reply = encode_reply(answer(request, msg_id))
+                out.append(reply)
+                size += len(reply)
+                if time.perf_counter() > deadline:
+                    break
+        except ProtocolError as exc:  # the good requests before it are answered below
+            backlog.clear()
+            backlog.append(None)
+            self._protocol_error(exc)
+        except Exception:
+            log.exception("client %d (%s): internal error, closing", self.index, self.peer)
+            self.abort()
+            return
+        if out:
+            self.received += len(out)
+            emu.stats.requests += len(out)
+            transport.write(out[0] if len(out) == 1 else b"".join(out))
+        if backlog and backlog[0] is None:
+            backlog.clear()
+            self._finish()
+            return
+        if backlog and not self._write_paused:
+            self._schedule()
+        self._update_reading()
+
+    def _schedule(self) -> None:
+        self._scheduled = True
+        asyncio.get_running_loop().call_soon(self._serve)
 
     async def _work(self) -> None:
         emu = self.emu
         transport = self.transport
         assert transport is not None
+        deadline = time.perf_counter() + SLICE
         try:
             while self.queue:
                 item = self.queue.popleft()
                 self._update_reading()
                 if item is None:
-                    transport.close()
+                    self._finish()
                     return
                 request, msg_id, nth = item
                 responder = self.responder
@@ -258,12 +345,17 @@ class _Connection(asyncio.BufferedProtocol):
                 if self._write_paused:
                     self._drained = asyncio.get_running_loop().create_future()
                     await self._drained
+                if time.perf_counter() > deadline:
+                    await asyncio.sleep(0)  # one slice per loop iteration, as on the fast path
+                    deadline = time.perf_counter() + SLICE
         except asyncio.CancelledError:
             raise
         except ProtocolError as exc:  # C3 Bridge: a message type it does not handle
             self.emu.stats.protocol_errors += 1
-            log.warning("client %d (%s): %s; closing", self.index, self.peer, exc)
-            transport.close()
+            _limited_conn.warning(
+                "client %d (%s): %s; closing", self.index, self.peer, clip(str(exc))
+            )
+            self._finish()
         except Exception:
             log.exception("client %d (%s): internal error, closing", self.index, self.peer)
             transport.abort()
@@ -275,7 +367,12 @@ class _Connection(asyncio.BufferedProtocol):
         transport = self.transport
         if transport is None or transport.is_closing():
             return
-        pause = self._write_paused or len(self.queue) >= self.emu.config.max_pending
+        pause = (
+            self.input_done
+            or self._write_paused
+            or bool(self.backlog)
+            or len(self.queue) >= self.emu.config.max_pending
+        )
         if pause != self._reading_paused:
             self._reading_paused = pause
             if pause:
@@ -285,23 +382,44 @@ class _Connection(asyncio.BufferedProtocol):
 
     def _protocol_error(self, exc: ProtocolError) -> None:
         self.emu.stats.protocol_errors += 1
-        log.warning("client %d (%s): %s; closing", self.index, self.peer, exc)
-        self.close()
+        _limited_conn.warning(
+            "client %d (%s): %s; closing", self.index, self.peer, clip(str(exc))
+        )
+        self.input_done = True
+        self._update_reading()
 
-    def close(self) -> None:
+    def _finish(self) -> None:
+        """Close after the replies already written: the slot is free at once, and a peer that
+        does not take its last replies within ``CLOSE_GRACE`` seconds is cut off."""
         self.closed = True
-        if self.transport is None:
+        self.emu._forget(self)
+        transport = self.transport
+        if transport is None or self.lost:
             return
-        if self.worker is None:
-            self.transport.close()
-        elif self._write_paused:
-            self.transport.abort()  # the worker waits for a reader that is not reading
+        pending = transport.get_write_buffer_size()
+        transport.close()
+        if pending:
+            asyncio.get_running_loop().call_later(CLOSE_GRACE, self.abort)
+
+    def drop(self) -> None:
+        """Close now (idle timer, shutdown): replies the peer has not read are discarded, so
+        a client that does not read cannot keep its slot or its buffers."""
+        self.closed = True
+        self.backlog.clear()
+        self.queue.clear()
+        self.emu._forget(self)
+        transport = self.transport
+        if transport is None or self.lost:
+            return
+        if transport.get_write_buffer_size() or self.worker is not None:
+            transport.abort()
         else:
-            self.queue.append(None)  # the worker closes after the replies already queued
+            transport.close()
 
     def abort(self) -> None:
         self.closed = True
-        if self.transport is not None:
+        self.emu._forget(self)
+        if self.transport is not None and not self.lost:
             self.transport.abort()
 
     def info(self) -> ConnectionInfo:
@@ -311,7 +429,7 @@ class _Connection(asyncio.BufferedProtocol):
             peer=self.peer,
             received=self.received,
             buffered=self.decoder.buffered,
-            pending=len(self.queue),
+            pending=len(self.queue) + len(self.backlog),
             write_buffer=transport.get_write_buffer_size() if transport else 0,
             reading_paused=self._reading_paused,
         )
@@ -332,6 +450,8 @@ class Emulator:
             self.store, strict=self.config.strict, ping="no-ping" not in self.config.quirks
         )
         self.legacy_ids = "legacy-ids" in self.config.quirks
+        #: Only whole requests reset the idle timer (``idle_reset="requests"``), not any byte.
+        self.idle_requests_only = self.config.idle_reset == "requests"
         self.service: ServiceQueue | None = None
         self.host = self.config.host
         self.port = self.config.port
@@ -345,6 +465,8 @@ class Emulator:
         #: C3 Bridge's standard discovery listener (UDP on the TCP port), if any.
         self._c3_standard: asyncio.DatagramTransport | None = None
         self.udp_standard_port: int | None = None
+        #: The UDP discovery listener (counters ``answered``, ``refused``), None when off.
+        self.discovery: DiscoveryProtocol | None = None
         #: The simulated robot (motion kernel, program, IPO clock) while started with
         #: ``config.robot``; None otherwise.
         self.robot: Robot | None = None
@@ -424,7 +546,7 @@ class Emulator:
             await self._start_c3_discovery(self.c3)
             return
         try:
-            transport, _ = await start_discovery(
+            transport, self.discovery = await start_discovery(
                 self.config.host, self.config.udp_port, self.config.udp_reply_port, self.identity
             )
         except OSError as exc:  # UDP 6999 taken: serve TCP anyway
@@ -477,12 +599,9 @@ class Emulator:
             self._c3_standard.close()
             self._c3_standard = None
         for conn in list(self._connections.values()):
-            conn.close()
-        await asyncio.sleep(0)
-        for conn in list(self._connections.values()):
-            conn.abort()  # still open: a client that does not read its replies
+            conn.drop()
         await server.wait_closed()
-        await asyncio.sleep(0)
+        await asyncio.sleep(0)  # the dropped transports report connection_lost
         log.info("emulator on %s:%d stopped", self.host, self.port)
 
     async def __aenter__(self) -> Self:
@@ -521,8 +640,10 @@ class Emulator:
         return True
 
     def _forget(self, conn: _Connection | Kvp9Connection) -> None:
-        self._connections.pop(conn.index, None)
-        self.stats.clients = len(self._connections)
+        """Free ``conn``'s slot (as soon as it is closing, before the socket is gone)."""
+        if self._connections.get(conn.index) is conn:
+            del self._connections[conn.index]
+            self.stats.clients = len(self._connections)
 
     async def _watch_idle(self) -> None:
         # KVP checks once a second; a finer tick keeps short test timeouts accurate.
@@ -533,8 +654,8 @@ class Emulator:
             limit = time.monotonic() - timeout
             for conn in list(self._connections.values()):
                 if not conn.closed and conn.last_rx < limit:
-                    log.info(
+                    _limited_conn.info(
                         "client %d (%s) idle for %.1f s, dropped", conn.index, conn.peer, timeout
                     )
                     self.stats.idle_drops += 1
-                    conn.close()
+                    conn.drop()

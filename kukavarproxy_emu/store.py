@@ -46,6 +46,9 @@ __all__ = ["Range", "UnknownVariable", "VariableStore", "WriteRefused"]
 
 log = logging.getLogger(__name__)
 
+#: Cached read texts per variable before its cache starts afresh (bounds memory, not speed).
+TEXT_CACHE_PATHS = 4096
+
 
 def _proxy_version() -> str:
     try:
@@ -156,8 +159,6 @@ class VariableStore:
         var = Var(key, type_name, spec, tuple(dims))
         var.ranges = ranges
         texts = [init] if isinstance(init, str) or init is None else list(init)
-        if var.is_array and len(texts) == 1:
-            texts *= len(var.elems)
         if len(texts) > len(var.elems):
             raise ValueError(f"{key}: {len(texts)} initial values for {len(var.elems)} elements")
         chain = var.chain(self.registry, ())
@@ -171,6 +172,8 @@ class VariableStore:
                 except Refused as exc:
                     raise ValueError(f"initial value of {key}: {exc}") from None
             var.elems[i] = parsed[text]
+        if var.is_array and len(texts) == 1 and texts[0] is not None:
+            var.elems = [var.elems[0]] * len(var.elems)  # one value for all: no per-element loop
         var.read_only = read_only
         self._vars[key] = var
         self._text.pop(key, None)
@@ -243,12 +246,73 @@ class VariableStore:
             if path.index is not None or path.members:
                 raise UnknownVariable(name)
             return self._info[path.base]
+        var = self._vars.get(path.base)
         try:
-            text = format_krc4(self._lookup(path, name))
+            if var is not None and var.is_array and path.index == () and not path.members:
+                text = self._whole_array_text(var, name)
+            else:
+                text = format_krc4(self._lookup(path, name))
         except KrlValueError:
             raise UnknownVariable(name) from None
-        self._text.setdefault(path.base, {})[path] = text
+        if cache is None:
+            cache = self._text[path.base] = {}
+        elif len(cache) >= TEXT_CACHE_PATHS:
+            cache.clear()  # a client walking every element of a huge array: keep memory flat
+        cache[path] = text
         return text
+
+    def _whole_array_text(self, var: Var, name: str) -> str:
+        """``NAME[]`` of a 1-D array from per-element texts, so that after a write to one
+        element a whole-array read formats that element only."""
+        if len(var.dims) > 1:  # a KRC prints only 1-D arrays whole
+            raise UnknownVariable(name)
+        texts = var.elem_text
+        if texts is None:
+            texts = var.elem_text = [None] * len(var.elems)
+        parts: list[str] = []
+        for i, text in enumerate(texts):
+            if text is None:
+                elem = var.elems[i]
+                if elem is None:
+                    raise UnknownVariable(name)
+                text = texts[i] = format_krc4(elem) + " "  # a KRC ends every element with " "
+            parts.append(text)
+        return "".join(parts)
+
+    def write_words(self, name: str, words: Sequence[int]) -> bool:
+        """KUKAVARPROXY's mode-3 array write: word ``k`` (0..65535) becomes ``NAME[k]``, one
+        element after the other, and only the last element's status is returned.
+
+        Exactly what writing ``str(word)`` to each element would do, without the per-element
+        cost, so one 64 KB frame (32 767 words) costs milliseconds, not a second: only INT and
+        REAL elements accept digits, elements beyond the array fail, out-of-range values fail
+        one by one.
+        """
+        path = parse_name(f"{name}[1]")
+        var = self._vars.get(path.base) if path is not None else None
+        if var is None or not words or var.read_only or var.text_len or len(var.dims) != 1:
+            return False  # every element refused (unknown, read-only, not a 1-D array, text)
+        kind = var.spec.kind
+        if kind is not Kind.INT and kind is not Kind.REAL:
+            return False  # digits are no BOOL, ENUM or struct literal
+        n = min(len(words), len(var.elems))
+        values: list[KrlValue] = (
+            list(words[:n]) if kind is Kind.INT else [float(w) for w in words[:n]]
+        )
+        ok = True
+        if var.ranges is None:
+            var.elems[:n] = values
+        else:
+            for i, value in enumerate(values):
+                try:
+                    check_ranges(var.ranges, var.name, value)
+                except Refused:
+                    ok = False
+                    continue
+                var.elems[i] = value
+                ok = True
+        self._changed(var, None)
+        return ok and len(words) <= len(var.elems)
 
     def write(self, name: str, text: str) -> str:
         """Parse ``text`` with the target's type and store it; returns the text to echo.
@@ -309,7 +373,7 @@ class VariableStore:
             except Refused as exc:
                 raise WriteRefused(name, str(exc)) from None
             var.elems = elems
-            self._text.pop(var.name, None)
+            self._changed(var, None)
             return
 
         def produce(spec: TypeSpec, type_name: str) -> KrlValue:
@@ -419,4 +483,13 @@ class VariableStore:
             raise WriteRefused(name, str(exc)) from None
         # The new value is complete: swapping it in is the only mutation.
         var.elems[slot] = new_elem
+        self._changed(var, slot)
+
+    def _changed(self, var: Var, slot: int | None) -> None:
+        """Drop the cached texts of ``var`` (of one element of its whole-array text, or all)."""
         self._text.pop(var.name, None)
+        if var.elem_text is not None:
+            if slot is None:
+                var.elem_text = None
+            else:
+                var.elem_text[slot] = None

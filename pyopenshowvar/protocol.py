@@ -37,6 +37,7 @@ __all__ = [
     "MAX_FRAME",
     "MAX_ID",
     "FrameDecoder",
+    "FramingError",
     "Mode",
     "Reply",
     "ReplyDecoder",
@@ -325,13 +326,23 @@ def decode_reply(frame: bytes | bytearray | memoryview) -> Reply:
     return Reply(msg_id, body[0], value, body[pos + 2], bytes(body[pos : pos + 2]))
 
 
+class FramingError(ProtocolError):
+    """A length field the decoder refuses; ``frames`` are the whole frames that came before it
+    in the same chunk, so a server can still answer them before it closes the connection."""
+
+    def __init__(self, message: str, frames: list[bytes]) -> None:
+        super().__init__(message)
+        self.frames = frames
+
+
 class FrameDecoder:
     """Incremental framer: feed arbitrary chunks, get whole frames (header included) back.
 
     A frame split over many chunks is reassembled and several frames in one chunk are all
     returned, in order. The length field is 16-bit, so at most one partial frame of < 64 KiB is
     ever buffered; ``max_frame`` lowers that bound further, ``min_length`` rejects impossible
-    length fields at once instead of waiting for bytes that would make no sense.
+    length fields at once instead of waiting for bytes that would make no sense. Such a length
+    raises :class:`FramingError`, which carries the whole frames of the chunk before it.
     """
 
     def __init__(self, *, min_length: int = 0, max_frame: int = MAX_FRAME) -> None:
@@ -353,13 +364,10 @@ class FrameDecoder:
         start = 0
         while len(buf) - start >= HEADER_SIZE:
             _, length = _HEADER.unpack_from(buf, start)
-            if length < self.min_length:
+            if length < self.min_length or HEADER_SIZE + length > self.max_frame:
                 self._buf = bytearray()
-                raise ProtocolError(f"length field {length} below the minimum {self.min_length}")
+                raise self._error(length, frames)
             size = HEADER_SIZE + length
-            if size > self.max_frame:
-                self._buf = bytearray()
-                raise ProtocolError(f"frame of {size} bytes exceeds the limit of {self.max_frame}")
             if len(buf) - start < size:
                 break
             frames.append(bytes(buf[start : start + size]))
@@ -376,11 +384,9 @@ class FrameDecoder:
         start = 0
         while total - start >= HEADER_SIZE:
             _, length = _HEADER.unpack_from(data, start)
-            if length < self.min_length:
-                raise ProtocolError(f"length field {length} below the minimum {self.min_length}")
+            if length < self.min_length or HEADER_SIZE + length > self.max_frame:
+                raise self._error(length, frames)
             size = HEADER_SIZE + length
-            if size > self.max_frame:
-                raise ProtocolError(f"frame of {size} bytes exceeds the limit of {self.max_frame}")
             if total - start < size:
                 break
             frames.append(data if size == total else data[start : start + size])
@@ -388,6 +394,13 @@ class FrameDecoder:
         if start < total:
             self._buf += data[start:]
         return frames
+
+    def _error(self, length: int, frames: list[bytes]) -> FramingError:
+        if length < self.min_length:
+            message = f"length field {length} below the minimum {self.min_length}"
+        else:
+            message = f"frame of {HEADER_SIZE + length} bytes exceeds the limit of {self.max_frame}"
+        return FramingError(message, frames)
 
     def eof(self) -> None:
         """Call at end of stream: raises if a frame was cut off mid-way."""
