@@ -3,7 +3,10 @@
 Plain argparse so the emulator needs nothing beyond the standard library (and numpy through
 the store). The first line on stdout, flushed, is ``listening on HOST:PORT`` with the real
 port, so scripts can start it with ``--port 0`` and read where it went. SIGINT and SIGTERM stop
-it cleanly with exit status 0.
+it cleanly with exit status 0, within ``STOP_DEADLINE`` seconds whatever runs: a watchdog
+thread, woken by the signal itself (``signal.set_wakeup_fd``, which works even while the main
+thread is busy), ends the process if the clean stop has not finished by then, and at once on a
+second signal.
 """
 
 from __future__ import annotations
@@ -11,9 +14,12 @@ from __future__ import annotations
 import argparse
 import asyncio
 import logging
+import os
 import signal
+import socket
 import sys
-from collections.abc import Sequence
+import threading
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from .config import (
@@ -34,6 +40,9 @@ from .server import Emulator
 __all__ = ["build_parser", "config_from_args", "main"]
 
 log = logging.getLogger("kukavarproxy_emu")
+
+#: Seconds after SIGINT/SIGTERM by which the process has ended, cleanly or not.
+STOP_DEADLINE = 0.9
 
 
 def build_parser(prog: str = "kukavarproxy-emu") -> argparse.ArgumentParser:
@@ -231,15 +240,62 @@ async def serve(config: EmulatorConfig) -> None:
     """Run until SIGINT/SIGTERM."""
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
+    restore = _arm_stop_signals(loop, stop)
+    try:
+        async with Emulator(config) as emu:
+            print(f"listening on {emu.host}:{emu.port}", flush=True)
+            await stop.wait()
+            log.info("stopping (%d requests served)", emu.stats.requests)
+    finally:
+        restore()
+
+
+def _arm_stop_signals(loop: asyncio.AbstractEventLoop, stop: asyncio.Event) -> Callable[[], None]:
+    """SIGINT/SIGTERM set ``stop``; the watchdog makes sure the process ends in time.
+
+    Returns the function that puts the previous signal handling back.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None  # signals are the main thread's business only
+    rsock, wsock = socket.socketpair()
+    wsock.setblocking(False)
+
+    def on_signal(signum: int, frame: object) -> None:
+        loop.call_soon_threadsafe(stop.set)
+
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+    old_fd = signal.set_wakeup_fd(wsock.fileno(), warn_on_full_buffer=False)
+    # The thread holds both ends: the wakeup fd must stay open for as long as it is installed.
+    threading.Thread(
+        target=_watchdog, args=(rsock, wsock), name="stop-watchdog", daemon=True
+    ).start()
+
+    def restore() -> None:
+        signal.set_wakeup_fd(old_fd)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        wsock.close()  # the watchdog's recv returns b"": it ends without acting
+
+    return restore
+
+
+def _watchdog(rsock: socket.socket, wsock: socket.socket) -> None:
+    with rsock:
+        if not rsock.recv(1):
+            return  # closed: the emulator stopped without a signal
+        rsock.settimeout(STOP_DEADLINE)
         try:
-            loop.add_signal_handler(sig, stop.set)
-        except (NotImplementedError, RuntimeError):  # Windows: Ctrl-C raises KeyboardInterrupt
+            if not rsock.recv(1):
+                return  # the clean stop finished in time
+        except TimeoutError:
             pass
-    async with Emulator(config) as emu:
-        print(f"listening on {emu.host}:{emu.port}", flush=True)
-        await stop.wait()
-        log.info("stopping (%d requests served)", emu.stats.requests)
+        # A second signal, or the event loop did not get to the stop in time.
+        print(
+            f"kukavarproxy-emu: not stopped {STOP_DEADLINE} s after the signal; exiting now",
+            file=sys.stderr,
+            flush=True,
+        )
+        os._exit(0)
 
 
 def main(argv: Sequence[str] | None = None, *, prog: str = "kukavarproxy-emu") -> int:

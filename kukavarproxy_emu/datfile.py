@@ -26,13 +26,13 @@ are case-insensitive)::
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
 __all__ = [
-    "Assignment",
     "MAX_ELEMENTS",
+    "Assignment",
     "DatFile",
     "DatSyntaxError",
     "Declaration",
@@ -94,6 +94,8 @@ class Declaration:
     is_global: bool
     is_const: bool
     line: int
+    #: Column (1-based) of the name, for messages (not part of equality).
+    column: int = field(default=1, compare=False)
 
 
 @dataclass(frozen=True, slots=True)
@@ -107,6 +109,8 @@ class Assignment:
     target: str
     value: str
     line: int
+    #: Column (1-based) where the target starts (not part of equality).
+    column: int = field(default=1, compare=False)
 
 
 @dataclass(frozen=True, slots=True)
@@ -312,7 +316,9 @@ class _Parser:
                 dims = self._dims(line)
             init = line.value_text(stop_at_comma=True) if line.accept("=") else None
             self.declarations.append(
-                Declaration(name, type_name, dims, init, is_global, is_const, line.lineno)
+                Declaration(
+                    name, type_name, dims, init, is_global, is_const, line.lineno, name_pos + 1
+                )
             )
             if not line.accept(","):
                 return
@@ -352,7 +358,7 @@ class _Parser:
         if not line.accept("="):
             raise line.error("expected a declaration or an assignment", start)
         value = line.value_text(stop_at_comma=False)
-        self.assignments.append(Assignment(target, value, line.lineno))
+        self.assignments.append(Assignment(target, value, line.lineno, start + 1))
 
     def _struc(self, line: _Line, is_global: bool) -> StrucDecl:
         name = line.ident("the structure name")

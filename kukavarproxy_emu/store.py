@@ -193,12 +193,12 @@ class VariableStore:
             try:
                 self.registry.add_enum(enum.name, enum.values)
             except ValueError as exc:
-                self._dat_problem(dat, enum.line, f"ENUM {enum.name}: {exc}")
+                self._dat_problem(dat, enum.line, 1, f"ENUM {enum.name}: {exc}")
         for struc in dat.structs:
             try:
                 self.registry.add_struct(struc.name, struc.members)
             except ValueError as exc:
-                self._dat_problem(dat, struc.line, f"STRUC {struc.name}: {exc}")
+                self._dat_problem(dat, struc.line, 1, f"STRUC {struc.name}: {exc}")
         declared: list[str] = []
         for decl in dat.declarations:
             if not (all_global or (decl.is_global and dat.public)):
@@ -209,22 +209,26 @@ class VariableStore:
                 )
                 declared.append(decl.name)
             except (ValueError, WriteRefused) as exc:
-                self._dat_problem(dat, decl.line, f"declaration of {decl.name}: {exc}")
+                self._dat_problem(
+                    dat, decl.line, decl.column, f"declaration of {decl.name}: {exc}"
+                )
         names = set(declared)
         for assign in dat.assignments:
             path = parse_name(assign.target)
             if path is None or path.base not in names:
-                self._dat_problem(dat, assign.line, f"{assign.target} is not declared here")
+                self._dat_problem(
+                    dat, assign.line, assign.column, f"{assign.target} is not declared here"
+                )
                 continue
             try:
                 produce = partial(self._parse, text=assign.value)
                 self._assign(assign.target, produce, bypass_read_only=True)
             except WriteRefused as exc:
-                self._dat_problem(dat, assign.line, str(exc))
+                self._dat_problem(dat, assign.line, assign.column, str(exc))
         return declared
 
-    def _dat_problem(self, dat: DatFile, line: int, message: str) -> None:
-        text = f"{dat.filename}:{line}: {message}"
+    def _dat_problem(self, dat: DatFile, line: int, column: int, message: str) -> None:
+        text = f"{dat.filename}:{line}:{column}: {message}"
         if self.strict:
             raise ValueError(text)
         log.warning("%s (skipped)", text)

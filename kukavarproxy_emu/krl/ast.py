@@ -40,6 +40,7 @@ from .ast_expr import (
     RealLit,
     StrLit,
     Unary,
+    Value,
 )
 
 __all__ = [
@@ -80,6 +81,7 @@ __all__ = [
     "StrucDef",
     "Switch",
     "Unary",
+    "Value",
     "WaitFor",
     "WaitSec",
     "While",

@@ -9,9 +9,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TypeAlias
 
+from pyopenshowvar.krl import KrlValue
+
 __all__ = [
     "Aggregate", "AggregateItem", "Binary", "BoolLit", "Call", "EnumLit", "Expr", "Index",
-    "IntLit", "Member", "Name", "Node", "RealLit", "StrLit", "Unary",
+    "IntLit", "Member", "Name", "Node", "RealLit", "StrLit", "Unary", "Value",
 ]  # fmt: skip
 
 
@@ -136,6 +138,15 @@ class Call(Node):
     args: tuple[Expr, ...]
 
 
+@dataclass(frozen=True, slots=True)
+class Value(Node):
+    """A value the executor has computed already. Never produced by the parser: the executor
+    puts it in place of a user function call (or of an operand evaluated before one) so that
+    the rest of the expression can be evaluated without running the call again."""
+
+    value: KrlValue
+
+
 Expr: TypeAlias = (
     IntLit
     | RealLit
@@ -149,4 +160,5 @@ Expr: TypeAlias = (
     | Unary
     | Binary
     | Call
+    | Value
 )

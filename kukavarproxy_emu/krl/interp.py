@@ -15,7 +15,11 @@ the next motion was planned in time, which the kernel decides.
 
 **Budget.** At most :attr:`Interpreter.budget` statements, and at most ``TIME_BUDGET`` (2 ms)
 of wall time, run per cycle, so a ``LOOP`` of assignments only burns a bounded slice of each
-cycle and the server keeps answering promptly. A motion
+cycle and the server keeps answering promptly. Statements inside user functions count too: a
+``DEFFCT`` called from an expression runs as a generator (:mod:`.interp_expr`) and is
+suspended mid-way like any statement, so a slow or endless function costs each cycle its
+slice and nothing more. Local variables of the live calls hold at most ``LOCAL_ELEMENTS``
+elements together (one array at most ``datfile.MAX_ELEMENTS``). A motion
 that completes at once (the robot already stands on its target) may run once per cycle
 before the loop yields, so ``LOOP PTP MYAXIS C_PTP ENDLOOP`` does not spin at rest.
 
@@ -34,8 +38,17 @@ from typing import TYPE_CHECKING
 from pyopenshowvar.krl import KrlValue
 
 from . import ast
+from .interp_expr import ExprMixin
 from .interp_motion import BUDGET, WAIT, MotionMixin
-from .runtime import ACTUAL_POSITION, Evaluator, Frame, KrlRuntimeError, convert, is_number
+from .runtime import (
+    ACTUAL_POSITION,
+    HEAVY_ELEMENTS,
+    Evaluator,
+    Frame,
+    KrlRuntimeError,
+    convert,
+    is_number,
+)
 
 if TYPE_CHECKING:
     from ..motion.kernel import MotionKernel
@@ -48,8 +61,13 @@ DEFAULT_BUDGET = 2000
 #: Wall seconds of statements per cycle, whichever of the two limits comes first: a runaway loop
 #: then costs the server at most this much latency per cycle, however slow the statements are.
 TIME_BUDGET = 0.002
-#: A DEFFCT called from an expression runs to completion; beyond this it is a runaway.
-FUNCTION_LIMIT = 200_000
+#: Statements between two looks at the clock (fewer after a statement on a large array).
+CHECK_EVERY = 16
+#: Elements of all local variables of the routines on the call stack together (8 MB of
+#: references): a deep recursion with a big local array is an error, not a memory hog.
+LOCAL_ELEMENTS = 1 << 20
+#: Routine calls nested deeper than this are an error (endless recursion).
+MAX_CALL_DEPTH = 64
 
 Gen = Generator[str, None, "Signal"]
 
@@ -72,7 +90,7 @@ class Halted(Exception):
     """``HALT`` reached (the main run got there): the program stops, no error message."""
 
 
-class Interpreter(MotionMixin):
+class Interpreter(ExprMixin, MotionMixin):
     """Executes one module's main routine, stepped once per IPO cycle."""
 
     def __init__(
@@ -93,6 +111,7 @@ class Interpreter(MotionMixin):
         self.ev = Evaluator(store, self.frames, self._call_function)
         self.count = 0  # statements this cycle
         self._until = 0.0  # perf_counter() at which this cycle's time budget ends
+        self._check_at = CHECK_EVERY  # statement count at which the clock is read next
         self.at_once = 0  # motions that completed at once this cycle
         self.total = 0  # statements since start (diagnostics, tests)
         self.finished = False
@@ -101,11 +120,16 @@ class Interpreter(MotionMixin):
         self.sim_time = 0.0
         self._gen: Gen | None = None
         self._reads: dict[int, bool] = {}
+        self._user_calls: dict[int, bool] = {}
+        self._local_sizes: dict[int, int] = {}
+        #: Elements of the locals of the routines on the call stack now.
+        self.local_elements = 0
 
     # --- driving -------------------------------------------------------------------------------
     def start(self) -> None:
         """(Re)start the main routine from its first statement."""
         self.frames.clear()
+        self.local_elements = 0
         self.finished = self.halted = False
         self._gen = self._main()
 
@@ -114,6 +138,7 @@ class Interpreter(MotionMixin):
         if self._gen is None or self.finished or self.halted:
             return
         self.count = self.at_once = 0
+        self._check_at = CHECK_EVERY
         self._until = time.perf_counter() + TIME_BUDGET
         try:
             next(self._gen)
@@ -140,8 +165,16 @@ class Interpreter(MotionMixin):
         """Count one statement; yield when this cycle's budget is used up."""
         self.count += 1
         self.total += 1
-        if self.count > self.budget or (not self.count & 63 and time.perf_counter() > self._until):
+        if self.count > self.budget:
             yield BUDGET
+        elif self.count >= self._check_at or self.ev.heavy:
+            # The clock is read every CHECK_EVERY statements, and after each statement that
+            # touched a large array (a call with big locals, a whole-array read), so the wall
+            # time stays bounded while short cycles run an exact number of statements.
+            self.ev.heavy = False
+            self._check_at = self.count + CHECK_EVERY
+            if time.perf_counter() > self._until:
+                yield BUDGET
 
     def _advance_stop(self) -> Generator[str, None, None]:
         """Wait until the main run has caught up (no queued or active motion)."""
@@ -180,21 +213,28 @@ class Interpreter(MotionMixin):
                 return True
         return False
 
-    def _bool(self, expr: ast.Expr) -> bool:
-        value = self.ev.eval(expr)
-        if not isinstance(value, bool):
-            raise KrlRuntimeError("condition is not BOOL", expr)
-        return value
-
     # --- routines ------------------------------------------------------------------------------
     def _invoke(self, routine: ast.Routine, args: tuple[ast.Expr, ...], node: ast.Node) -> Gen:
         """Call ``routine`` with ``args``; returns its _Return (the DEFFCT value)."""
         if len(args) > len(routine.params):
             raise KrlRuntimeError(f"{routine.name} takes {len(routine.params)} argument(s)", node)
-        values = [self.ev.eval(a) for a in args]
+        lowered: list[ast.Expr] = []  # user calls in the arguments run once, here
+        for arg in args:
+            lowered.append((yield from self._lower(arg)))
+        values = [self.ev.eval(a) for a in lowered]
         refs = [self.ev.ref(a) if p.direction == "OUT" and _lvalue(a) else None
-                for p, a in zip(routine.params, args, strict=False)]  # fmt: skip
+                for p, a in zip(routine.params, lowered, strict=False)]  # fmt: skip
+        if len(self.frames) >= MAX_CALL_DEPTH:
+            raise KrlRuntimeError("call stack overflow (endless recursion?)", node)
+        size = self._local_size(routine)
+        if self.local_elements + size > LOCAL_ELEMENTS:
+            raise KrlRuntimeError(
+                f"calling {routine.name}: local variables of the call stack would exceed"
+                f" {LOCAL_ELEMENTS} elements (endless recursion or a huge local array?)",
+                node,
+            )
         frame = Frame(routine, self.store)
+        self.ev.heavy = self.ev.heavy or size >= HEAVY_ELEMENTS
         for param, value in zip(routine.params, values, strict=False):
             if param.name not in frame.names:
                 raise KrlRuntimeError(f"parameter {param.name} has no DECL", routine)
@@ -203,13 +243,13 @@ class Interpreter(MotionMixin):
                 self.ev.put(frame.store, param.name, param.name, value, node)
             finally:
                 self.ev.frames.pop()
-        if len(self.frames) > 64:
-            raise KrlRuntimeError("call stack overflow (endless recursion?)", node)
         self.frames.append(frame)
+        self.local_elements += size
         try:
             signal = yield from self._block(routine.body)
         finally:
             self.frames.pop()
+            self.local_elements -= size
         for param, ref in zip(routine.params, refs, strict=False):
             if ref is not None:  # OUT parameter: copy back (KRL passes it by reference)
                 try:
@@ -226,35 +266,48 @@ class Interpreter(MotionMixin):
             return _Return(value)
         return None
 
-    def _call_function(self, call: ast.Call) -> KrlValue:
-        """Run a user DEFFCT to completion (it is called from inside an expression)."""
+    def _local_size(self, routine: ast.Routine) -> int:
+        """Elements the locals of ``routine`` occupy (a CHAR array is one text)."""
+        size = self._local_sizes.get(id(routine))
+        if size is None:
+            size = 0
+            for decl in routine.decls:
+                if isinstance(decl, ast.Decl):
+                    for d in decl.declarations:
+                        n = 1
+                        for dim in d.dims:
+                            n *= dim
+                        size += 1 if d.type_name == "CHAR" else n
+            self._local_sizes[id(routine)] = size
+        return size
+
+    def _call_fn(self, call: ast.Call) -> Generator[str, None, KrlValue]:
+        """Run a user DEFFCT called from an expression; its statements count and may yield."""
         routine = self.module.routine(call.name)
         if routine is None:
             raise KrlRuntimeError(f"unknown function {call.name}", call)
         if not routine.is_function:
             raise KrlRuntimeError(f"{call.name} is a DEF, not a DEFFCT", call)
-        gen = self._invoke(routine, call.args, call)
-        saved, steps = self.count, 0
-        try:
-            while True:
-                reason = next(gen)
-                if reason != BUDGET:
-                    raise KrlRuntimeError(
-                        f"{call.name}: WAIT or motion inside a function used in an expression"
-                        " is not supported by the emulator",
-                        call,
-                    )
-                steps += self.count
-                self.count = 0
-                if steps > FUNCTION_LIMIT:
-                    raise KrlRuntimeError(f"function {call.name} does not return", call)
-        except StopIteration as stop:
-            result = stop.value
-        finally:
-            gen.close()
-            self.count = saved
+        result = yield from self._invoke(routine, call.args, call)
         assert isinstance(result, _Return) and result.value is not None
         return result.value
+
+    def _call_function(self, call: ast.Call) -> KrlValue:
+        """The Evaluator's hook for a user call it meets itself. The executor hands it only
+        expressions without user calls (see :mod:`.interp_expr`); should one slip through, the
+        call runs within this cycle's budget or fails, it never runs unbounded."""
+        gen = self._call_fn(call)
+        try:
+            reason = next(gen)
+        except StopIteration as stop:
+            return stop.value  # type: ignore[no-any-return]
+        finally:
+            gen.close()
+        raise KrlRuntimeError(
+            f"{call.name}: the function must wait ({reason}) where the emulator cannot"
+            " suspend it",
+            call,
+        )
 
     # --- statements ----------------------------------------------------------------------------
     def _block(self, body: tuple[ast.Stmt, ...]) -> Gen:
@@ -268,12 +321,13 @@ class Interpreter(MotionMixin):
         yield from self._tick()
         if isinstance(stmt, ast.Assign):
             yield from self._stop_if_reads(stmt.target, stmt.value)
-            self.ev.assign(stmt.target, self.ev.eval(stmt.value), stmt)
+            value = yield from self._eval(stmt.value)
+            self.ev.assign((yield from self._lower(stmt.target)), value, stmt)
         elif isinstance(stmt, ast.Motion | ast.InlineMotion):
             yield from self._motion(stmt)
         elif isinstance(stmt, ast.If):
             yield from self._stop_if_reads(stmt.cond)
-            body = stmt.then_body if self._bool(stmt.cond) else stmt.else_body
+            body = stmt.then_body if (yield from self._cond(stmt.cond)) else stmt.else_body
             return (yield from self._block(body))
         elif isinstance(stmt, ast.Loop):
             return (yield from self._loop(stmt))
@@ -282,7 +336,7 @@ class Interpreter(MotionMixin):
         elif isinstance(stmt, ast.While):
             while True:
                 yield from self._stop_if_reads(stmt.cond)
-                if not self._bool(stmt.cond):
+                if not (yield from self._cond(stmt.cond)):
                     return None
                 signal = yield from self._block(stmt.body)
                 if signal is not None:
@@ -294,14 +348,14 @@ class Interpreter(MotionMixin):
                 if signal is not None:
                     return None if signal is _EXIT else signal
                 yield from self._stop_if_reads(stmt.cond)
-                if self._bool(stmt.cond):
+                if (yield from self._cond(stmt.cond)):
                     return None
                 yield from self._tick()
         elif isinstance(stmt, ast.Switch):
             return (yield from self._switch(stmt))
         elif isinstance(stmt, ast.WaitFor):
             yield from self._advance_stop()
-            while not self._bool(stmt.cond):
+            while not (yield from self._cond(stmt.cond)):
                 yield WAIT
         elif isinstance(stmt, ast.WaitSec):
             yield from self._wait_sec(stmt)
@@ -311,7 +365,7 @@ class Interpreter(MotionMixin):
             if stmt.value is None:
                 return _Return(None)
             yield from self._stop_if_reads(stmt.value)
-            return _Return(self.ev.eval(stmt.value))
+            return _Return((yield from self._eval(stmt.value)))
         elif isinstance(stmt, ast.Exit):
             return _EXIT
         elif isinstance(stmt, ast.Halt):
@@ -332,8 +386,9 @@ class Interpreter(MotionMixin):
     def _for(self, stmt: ast.For) -> Gen:
         yield from self._stop_if_reads(stmt.start, stmt.stop, stmt.step)
         var = ast.Name(stmt.var, line=stmt.line, column=stmt.column)
-        first, last = self.ev.eval(stmt.start), self.ev.eval(stmt.stop)
-        step = self.ev.eval(stmt.step) if stmt.step is not None else 1
+        first = yield from self._eval(stmt.start)
+        last = yield from self._eval(stmt.stop)
+        step = (yield from self._eval(stmt.step)) if stmt.step is not None else 1
         for v in (first, last, step):
             if not is_number(v):
                 raise KrlRuntimeError("FOR needs INT bounds and STEP", stmt)
@@ -354,17 +409,18 @@ class Interpreter(MotionMixin):
 
     def _switch(self, stmt: ast.Switch) -> Gen:
         yield from self._stop_if_reads(stmt.selector)
-        selector = self.ev.eval(stmt.selector)
+        selector = yield from self._eval(stmt.selector)
         for case in stmt.cases:
-            if any(self.ev.eval(v) == selector for v in case.values):
-                return (yield from self._block(case.body))
+            for v in case.values:
+                if (yield from self._eval(v)) == selector:
+                    return (yield from self._block(case.body))
         if stmt.default is not None:
             return (yield from self._block(stmt.default))
         return None
 
     def _wait_sec(self, stmt: ast.WaitSec) -> Gen:
         yield from self._advance_stop()
-        seconds = self.ev.eval(stmt.seconds)
+        seconds = yield from self._eval(stmt.seconds)
         if not is_number(seconds):
             raise KrlRuntimeError("WAIT SEC needs a number", stmt)
         end = self.now() + float(seconds)  # type: ignore[arg-type]

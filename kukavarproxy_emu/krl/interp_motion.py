@@ -51,6 +51,12 @@ class MotionMixin:
     def _stop_if_reads(self, *exprs: ast.Expr | None) -> Generator[str, None, None]:
         raise NotImplementedError  # provided by Interpreter
 
+    def _eval(self, expr: ast.Expr) -> Generator[str, None, KrlValue]:
+        raise NotImplementedError  # provided by ExprMixin
+
+    def _lower(self, expr: ast.Expr) -> Generator[str, None, ast.Expr]:
+        raise NotImplementedError  # provided by ExprMixin
+
     def advance(self) -> int:
         """``$ADVANCE`` (0..5)."""
         value = self.store.get("$ADVANCE")
@@ -67,11 +73,12 @@ class MotionMixin:
             yield WAIT
         # The advance run reads the target now: it is captured when the motion is planned.
         if isinstance(stmt, ast.InlineMotion):
-            target, label = self._inline(stmt)
+            target, label = yield from self._inline(stmt)
             approx = stmt.cont
         else:
-            target = self.ev.eval(stmt.target)
-            label = f"{stmt.kind} {render(stmt.target, self._index_text)}"
+            expr = yield from self._lower(stmt.target)  # a user call in it runs once, here
+            target = self.ev.eval(expr)
+            label = f"{stmt.kind} {render(expr, self._index_text)}"
             approx = stmt.approx is not None
         try:
             tool = isinstance(stmt, ast.Motion) and stmt.frame == "TOOL"
@@ -146,9 +153,9 @@ class MotionMixin:
                 out[i] = float(value)  # type: ignore[arg-type]
         return out
 
-    def _inline(self, stmt: ast.InlineMotion) -> tuple[KrlValue, str]:
+    def _inline(self, stmt: ast.InlineMotion) -> Generator[str, None, tuple[KrlValue, str]]:
         """Target and label of ``PTP HOME Vel = 100 % DEFAULT``; sets the velocity."""
-        velocity = self.ev.eval(stmt.velocity)
+        velocity = yield from self._eval(stmt.velocity)
         if not is_number(velocity) or float(velocity) <= 0:  # type: ignore[arg-type]
             raise KrlRuntimeError("inline form: the velocity must be a positive number", stmt)
         vel = float(velocity)  # type: ignore[arg-type]
@@ -165,7 +172,7 @@ class MotionMixin:
         elif name == "HOME" and not self.ev.has("HOME"):
             target = Struct(None, dict(zip(_AXES, HOME_AXES, strict=True)))
         else:
-            target = self.ev.eval(stmt.target)
+            target = yield from self._eval(stmt.target)
         return target, f"{stmt.kind} {render(stmt.target)}"
 
 

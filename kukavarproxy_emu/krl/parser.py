@@ -15,6 +15,7 @@ from pathlib import Path
 from .. import datfile
 from . import ast
 from .lexer import KrlSyntaxError, tokenize
+from .parser_expr import MAX_NESTING
 from .parser_motion import MOTIONS, MotionParser
 
 __all__ = ["KrlSyntaxError", "parse_dat", "parse_src", "read_src"]
@@ -31,6 +32,8 @@ _KEYWORDS = MOTIONS | _BLOCK_END | frozenset(
      "INI", "RETURN", "DEF", "DEFFCT", "INTERRUPT", "TRIGGER", "GOTO", "BRAKE", "RESUME",
      "ANIN", "ANOUT", "PULSE", "SIGNAL", "EXT", "EXTFCT"}
 )  # fmt: skip
+# Statements that open a block of statements (their nesting is limited).
+_OPENERS = frozenset({"IF", "LOOP", "FOR", "WHILE", "REPEAT", "SWITCH"})
 # Recognised but outside the emulated subset: a clear message beats "unexpected text".
 _UNSUPPORTED = frozenset(
     {"INTERRUPT", "TRIGGER", "GOTO", "BRAKE", "RESUME", "ANIN", "ANOUT", "PULSE", "SIGNAL"}
@@ -39,6 +42,9 @@ _UNSUPPORTED = frozenset(
 
 class _Parser(MotionParser):
     """Statement and module grammar on top of the expression parser."""
+
+    #: Statement blocks open in the parse in progress (nesting of IF, LOOP, FOR, ...).
+    blocks = 0
 
     # ------------------------------------------------------------------------ helpers
 
@@ -130,6 +136,15 @@ class _Parser(MotionParser):
 
     def block(self, *closers: str) -> tuple[ast.Stmt, ...]:
         """Statements up to (not including) one of the ``closers`` words or EOF."""
+        self.blocks += 1
+        try:
+            if self.blocks > MAX_NESTING + 1:  # the routine's own body is one level
+                raise self.error(f"control structures nested deeper than {MAX_NESTING} levels")
+            return self._block_body(closers)
+        finally:
+            self.blocks -= 1
+
+    def _block_body(self, closers: tuple[str, ...]) -> tuple[ast.Stmt, ...]:
         body: list[ast.Stmt] = []
         while True:
             token = self.tok
@@ -153,6 +168,8 @@ class _Parser(MotionParser):
             raise self.error(f"{word} is not supported by the emulator's KRL subset")
         if word in ("DEF", "DEFFCT"):
             raise self.error(f"{word} inside a routine (missing END?)")
+        if word in _OPENERS and self.blocks > MAX_NESTING:
+            raise self.error(f"control structures nested deeper than {MAX_NESTING} levels")
         if word in MOTIONS:
             stmt = self.motion()
         elif word == "IF":

@@ -15,6 +15,11 @@ is *not* the C order: comparisons bind loosest, below ``OR``. So ``A > 1 AND B <
     7  ==  <>  <  <=  >  >=            (loosest)
 
 All binary operators associate to the left.
+
+Nesting is limited to ``MAX_NESTING`` levels (parentheses, signs, aggregates, and the depth of
+the finished expression tree, which a long chain of operators also deepens): the parser and the
+executor walk expressions recursively, and a syntax error at the offending token is better
+than running out of stack.
 """
 
 from __future__ import annotations
@@ -22,7 +27,10 @@ from __future__ import annotations
 from . import ast
 from .lexer import KrlSyntaxError, Token
 
-__all__ = ["BINARY_PRIORITY", "ExprParser"]
+__all__ = ["BINARY_PRIORITY", "MAX_NESTING", "ExprParser"]
+
+#: Deepest expression (and, in the statement parser, block) nesting accepted.
+MAX_NESTING = 64
 
 # Binding power of every binary operator: larger binds tighter (see the module docstring).
 BINARY_PRIORITY: dict[str, int] = {
@@ -57,6 +65,7 @@ class ExprParser:
         self.lines = text.split("\n")
         self.filename = filename
         self.pos = 0
+        self.depth = 0  # expression nesting of the parse in progress
 
     # ------------------------------------------------------------------ cursor helpers
 
@@ -123,7 +132,16 @@ class ExprParser:
 
     def expression(self) -> ast.Expr:
         """Parse a full expression (precedence climbing over :data:`BINARY_PRIORITY`)."""
-        return self._binary(0)
+        start = self.tok
+        expr = self._binary(0)
+        if self.depth == 0 and _deeper_than(expr, MAX_NESTING):
+            raise self.error(f"expression nested deeper than {MAX_NESTING} levels", start)
+        return expr
+
+    def _enter(self, token: Token) -> None:
+        self.depth += 1
+        if self.depth > MAX_NESTING:
+            raise self.error(f"expression nested deeper than {MAX_NESTING} levels", token)
 
     def _binary_op(self) -> str | None:
         token = self.tok
@@ -147,13 +165,17 @@ class ExprParser:
 
     def _unary(self) -> ast.Expr:
         token = self.tok
-        if (token.kind == "OP" and token.value in "-+") or (
-            token.kind == "NAME" and token.value in _UNARY_WORDS
-        ):
-            self.advance()
-            operand = self._unary()
-            return ast.Unary(token.value, operand, line=token.line, column=token.column)
-        return self.postfix(self.primary())
+        self._enter(token)
+        try:
+            if (token.kind == "OP" and token.value in "-+") or (
+                token.kind == "NAME" and token.value in _UNARY_WORDS
+            ):
+                self.advance()
+                operand = self._unary()
+                return ast.Unary(token.value, operand, line=token.line, column=token.column)
+            return self.postfix(self.primary())
+        finally:
+            self.depth -= 1
 
     def primary(self) -> ast.Expr:
         """A literal, aggregate, name, call or parenthesised expression."""
@@ -255,6 +277,13 @@ class ExprParser:
 
     def _constant(self) -> ast.Expr:
         token = self.tok
+        self._enter(token)
+        try:
+            return self._constant_inner(token)
+        finally:
+            self.depth -= 1
+
+    def _constant_inner(self, token: Token) -> ast.Expr:
         if token.kind == "OP" and token.value in "-+":
             self.advance()
             operand = self._constant()
@@ -268,3 +297,27 @@ class ExprParser:
         raise self.error(
             f"aggregate members must be constants, found {self.describe(token)}", token
         )
+
+
+def _deeper_than(expr: ast.Expr, limit: int) -> bool:
+    """Whether the expression tree is more than ``limit`` levels deep (no recursion here)."""
+    stack: list[tuple[ast.Expr, int]] = [(expr, 1)]
+    while stack:
+        node, depth = stack.pop()
+        if depth > limit:
+            return True
+        children: tuple[ast.Expr, ...] = ()
+        if isinstance(node, ast.Binary):
+            children = (node.left, node.right)
+        elif isinstance(node, ast.Unary):
+            children = (node.operand,)
+        elif isinstance(node, ast.Index):
+            children = (node.base, *node.indices)
+        elif isinstance(node, ast.Member):
+            children = (node.base,)
+        elif isinstance(node, ast.Call):
+            children = node.args
+        elif isinstance(node, ast.Aggregate):
+            children = tuple(item.value for item in node.items)
+        stack.extend((child, depth + 1) for child in children)
+    return False

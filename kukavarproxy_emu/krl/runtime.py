@@ -36,6 +36,7 @@ if TYPE_CHECKING:
 __all__ = [
     "ACTUAL_POSITION",
     "BUILTINS",
+    "HEAVY_ELEMENTS",
     "Evaluator",
     "Frame",
     "KrlRuntimeError",
@@ -47,6 +48,8 @@ ACTUAL_POSITION = frozenset({"$AXIS_ACT", "$POS_ACT", "$AXIS_ACT_MEAS", "$POS_AC
 #: System variables the store marks read-only for KUKAVARPROXY but a KRL program may write.
 KRL_WRITABLE = frozenset({"$OUT", "$TIMER", "$TIMER_STOP"})
 _INT_MIN, _INT_MAX = -(2**31), 2**31 - 1
+#: A value with this many elements makes the executor look at its wall-time budget at once.
+HEAVY_ELEMENTS = 4096
 
 
 class KrlRuntimeError(Exception):
@@ -111,7 +114,7 @@ def render(expr: ast.Expr, index: Callable[[ast.Expr], str] | None = None) -> st
         return f"{expr.name}()"
     if isinstance(expr, ast.Aggregate):
         return expr.text
-    if isinstance(expr, ast.IntLit | ast.RealLit):
+    if isinstance(expr, ast.IntLit | ast.RealLit | ast.Value):
         return str(expr.value)
     return type(expr).__name__
 
@@ -173,6 +176,8 @@ class Evaluator:
         self.frames = frames
         self.call = call
         self._globals = set(store.names())
+        #: Set when an evaluation copied a large array (the executor checks its clock).
+        self.heavy = False
 
     # --- references ----------------------------------------------------------------------------
     def scope(self, name: str, node: ast.Node) -> VariableStore:
@@ -231,7 +236,7 @@ class Evaluator:
     # --- expressions ---------------------------------------------------------------------------
     def eval(self, expr: ast.Expr) -> KrlValue:
         """The value of ``expr``; raises :class:`KrlRuntimeError`."""
-        if isinstance(expr, ast.IntLit | ast.RealLit | ast.BoolLit | ast.StrLit):
+        if isinstance(expr, ast.IntLit | ast.RealLit | ast.BoolLit | ast.StrLit | ast.Value):
             return expr.value
         if isinstance(expr, ast.Name | ast.Index | ast.Member):
             if isinstance(expr, ast.Member) and not _is_lvalue(expr.base):
@@ -241,9 +246,12 @@ class Evaluator:
                 return base[expr.member]
             store, text, _ = self.ref(expr)
             try:
-                return store.get(text)
+                value = store.get(text)
             except UnknownVariable:
                 raise KrlRuntimeError(f"{text} is not initialised", expr) from None
+            if isinstance(value, list) and len(value) >= HEAVY_ELEMENTS:
+                self.heavy = True
+            return value
         if isinstance(expr, ast.EnumLit):
             return KrlEnum._from_parsed(expr.name)
         if isinstance(expr, ast.Binary):
@@ -472,5 +480,7 @@ def _type_of(value: object) -> str:
 
 
 def _short(value: KrlValue) -> str:
+    # A CHAR value may have come from a client: escaped, it cannot break the log line.
     text = str(value) if not isinstance(value, Struct) else "{...}"
+    text = text.encode("unicode_escape").decode("ascii")
     return text if len(text) < 30 else text[:27] + "..."

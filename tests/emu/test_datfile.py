@@ -193,7 +193,7 @@ def test_store_skips_bad_declarations_unless_strict(caplog: pytest.LogCaptureFix
     store = VariableStore(default_config=False)
     assert store.load_dat(text) == ["OK"]
     assert "MYSTATE" in caplog.text and "BAD" in caplog.text and "UNDECLARED" in caplog.text
-    with pytest.raises(ValueError, match=r"<dat>:1: declaration of MYSTATE"):
+    with pytest.raises(ValueError, match=r"<dat>:1:14: declaration of MYSTATE"):
         VariableStore(default_config=False, strict=True).load_dat(text)
 
 

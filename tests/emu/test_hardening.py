@@ -121,7 +121,7 @@ async def test_costly_pipelined_batch_lets_the_loop_run(
     for i in range(1, 513):
         emu.store.write(f"MYE6ARRAY[{i}]", E6 % i)
     pairs = [
-        encode_write(2 * i, f"MYE6ARRAY[{i % 512 + 1}]", "{A1 %d.5}" % i)
+        encode_write(2 * i, f"MYE6ARRAY[{i % 512 + 1}]", f"{{A1 {i}.5}}")
         + encode_read(2 * i + 1, "MYE6ARRAY[]")
         for i in range(300)
     ]
@@ -151,7 +151,7 @@ def test_write_then_whole_array_read_formats_one_element() -> None:
     responder.answer(Request(1, Mode.READ, "MYE6ARRAY[]", None), 1)
     start = time.process_time()
     for i in range(50):
-        store.write(f"MYE6ARRAY[{i + 1}]", "{A1 %d.5}" % i)
+        store.write(f"MYE6ARRAY[{i + 1}]", f"{{A1 {i}.5}}")
         responder.answer(Request(1, Mode.READ, "MYE6ARRAY[]", None), 1)
     per_pair = (time.process_time() - start) / 50
     assert per_pair < 0.002  # before: every read formatted 512 elements (~10-15 ms)
