@@ -177,7 +177,7 @@ class Responder:
         payload = request.value or b""
         if not payload or len(payload) % 2:
             return self._failure(msg_id, Mode.WRITE_ARRAY)
-        words = [word for (word,) in _U16.iter_unpack(payload)]
+        words = struct.unpack(f">{len(payload) // 2}H", payload)
         try:
             # KVP writes NAME[1..k] one by one; only the last element's status survives.
             ok = self.store.write_words(request.name.removesuffix("[]"), words)

@@ -74,7 +74,7 @@ READ_SIZE = 32 * 1024
 OUTPUT_LIMIT = 64 * 1024
 #: Seconds of request handling one connection gets per event-loop iteration; the rest of its
 #: batch waits for the next iteration, so other clients and the IPO clock get their turn.
-SLICE = 0.002
+SLICE = 0.001
 #: Seconds a closing connection may take to flush its last replies before it is aborted.
 CLOSE_GRACE = 2.0
 #: Worker queue: (request, id the reply carries, request number on its connection); None =
@@ -382,9 +382,7 @@ class _Connection(asyncio.BufferedProtocol):
 
     def _protocol_error(self, exc: ProtocolError) -> None:
         self.emu.stats.protocol_errors += 1
-        _limited_conn.warning(
-            "client %d (%s): %s; closing", self.index, self.peer, clip(str(exc))
-        )
+        _limited_conn.warning("client %d (%s): %s; closing", self.index, self.peer, clip(str(exc)))
         self.input_done = True
         self._update_reading()
 

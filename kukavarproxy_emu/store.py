@@ -209,9 +209,7 @@ class VariableStore:
                 )
                 declared.append(decl.name)
             except (ValueError, WriteRefused) as exc:
-                self._dat_problem(
-                    dat, decl.line, decl.column, f"declaration of {decl.name}: {exc}"
-                )
+                self._dat_problem(dat, decl.line, decl.column, f"declaration of {decl.name}: {exc}")
         names = set(declared)
         for assign in dat.assignments:
             path = parse_name(assign.target)
@@ -273,15 +271,17 @@ class VariableStore:
         texts = var.elem_text
         if texts is None:
             texts = var.elem_text = [None] * len(var.elems)
-        parts: list[str] = []
-        for i, text in enumerate(texts):
-            if text is None:
-                elem = var.elems[i]
-                if elem is None:
-                    raise UnknownVariable(name)
-                text = texts[i] = format_krc4(elem) + " "  # a KRC ends every element with " "
-            parts.append(text)
-        return "".join(parts)
+        i = 0
+        while True:  # list.index scans in C: a read after one write formats one element
+            try:
+                i = texts.index(None, i)
+            except ValueError:
+                break
+            elem = var.elems[i]
+            if elem is None:
+                raise UnknownVariable(name)
+            texts[i] = format_krc4(elem) + " "  # a KRC ends every element with " "
+        return "".join(texts)  # type: ignore[arg-type]  # no None left
 
     def write_words(self, name: str, words: Sequence[int]) -> bool:
         """KUKAVARPROXY's mode-3 array write: word ``k`` (0..65535) becomes ``NAME[k]``, one
@@ -300,9 +300,7 @@ class VariableStore:
         if kind is not Kind.INT and kind is not Kind.REAL:
             return False  # digits are no BOOL, ENUM or struct literal
         n = min(len(words), len(var.elems))
-        values: list[KrlValue] = (
-            list(words[:n]) if kind is Kind.INT else [float(w) for w in words[:n]]
-        )
+        values: Sequence[KrlValue] = words[:n] if kind is Kind.INT else list(map(float, words[:n]))
         ok = True
         if var.ranges is None:
             var.elems[:n] = values

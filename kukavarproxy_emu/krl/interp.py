@@ -304,8 +304,7 @@ class Interpreter(ExprMixin, MotionMixin):
         finally:
             gen.close()
         raise KrlRuntimeError(
-            f"{call.name}: the function must wait ({reason}) where the emulator cannot"
-            " suspend it",
+            f"{call.name}: the function must wait ({reason}) where the emulator cannot suspend it",
             call,
         )
 

@@ -15,6 +15,8 @@ import time
 import tracemalloc
 
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
 from kukavarproxy_emu import Emulator
 from kukavarproxy_emu.handler import Responder
@@ -254,3 +256,45 @@ async def test_idle_reset_bytes_like_kvp_or_requests_only(
         else:
             assert emu.stats.idle_drops == 1
             assert await c.is_closed_by_peer()
+
+
+def _reference_words(store: VariableStore, name: str, words: list[int]) -> bool:
+    """Mode 3 as KVP does it: NAME[k] = str(word) one by one; the last status counts."""
+    ok = False
+    for k, word in enumerate(words, start=1):
+        try:
+            store.write(f"{name}[{k}]", str(word))
+            ok = True
+        except (LookupError, ValueError):
+            ok = False
+    return ok
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    kind=st.sampled_from(["INT", "REAL", "BOOL", "E6AXIS", "CHAR"]),
+    dims=st.sampled_from([(1,), (5,), (12,), (3, 4)]),
+    limited=st.booleans(),
+    read_only=st.booleans(),
+    words=st.lists(st.integers(0, 0xFFFF), min_size=1, max_size=16),
+    name=st.sampled_from(["V", "v", "V[]", "NOPE", "V.X", " V"]),
+)
+def test_bulk_mode3_write_equals_element_by_element(
+    kind: str,
+    dims: tuple[int, ...],
+    limited: bool,
+    read_only: bool,
+    words: list[int],
+    name: str,
+) -> None:
+    assume(not (kind == "CHAR" and len(dims) > 1))  # not declarable
+    stores = []
+    for _ in range(2):
+        store = VariableStore(system=False, default_config=False)
+        ranges = (0.0, 30_000.0) if limited and kind in ("INT", "REAL") else None
+        store.declare("V", kind, dims, None, read_only, ranges)
+        stores.append(store)
+    base = name.removesuffix("[]")
+    expected = _reference_words(stores[0], base, words)
+    assert stores[1].write_words(base, words) is expected
+    assert stores[1].snapshot() == stores[0].snapshot()

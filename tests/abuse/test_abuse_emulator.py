@@ -1,0 +1,157 @@
+"""Abuse suite, emulator side (issue 16): misbehaving clients and runaway KRL against
+``kukavarproxy-emu`` in a subprocess, with a bystander client in its own process.
+
+Every scenario asserts what the issue promises: the emulator's resident memory grows by at
+most 50 MB, the bystander's round trips stay at p99 <= 20 ms and max <= 100 ms, and no reply
+anyone reads carries a wrong value. Latency bounds are checked here on purpose (that is the
+promise under test); on a heavily loaded machine re-run a failing scenario alone before
+chasing it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+import sys
+from collections.abc import Callable, Coroutine, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from kukavarproxy_emu.abuse import (
+    RUNAWAY_KRL,
+    AbuseTally,
+    EmulatorProcess,
+    ProbeResult,
+    costly_pipeline,
+    garbage,
+    long_names,
+    mode3_flood,
+    non_reader,
+    start_probe,
+)
+from pyopenshowvar.protocol import ReplyDecoder, encode_read
+
+pytestmark = [
+    pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RSS from /proc"),
+    pytest.mark.timeout(90),
+]
+
+SECONDS = 4.0
+RSS_GROWTH_MB = 50.0
+P99_MS = 20.0
+MAX_MS = 100.0
+CONFIG = "DEFDAT $CONFIG\nDECL INT ABUSE_PROBE=0\nDECL INT ABUSE_WORDS[32000]\nENDDAT\n"
+
+Abuser = Callable[[str, int, AbuseTally], Coroutine[Any, Any, None]]
+
+
+class Session:
+    """One emulator subprocess and the RSS it had once warmed up."""
+
+    def __init__(self, emu: EmulatorProcess) -> None:
+        self.emu = emu
+        self.baseline = 0.0
+
+    def abuse(
+        self, abusers: list[Abuser], seconds: float = SECONDS
+    ) -> tuple[ProbeResult, AbuseTally, float]:
+        """Run the bystander and ``abusers`` together; (probe result, tally, RSS growth)."""
+        emu = self.emu
+        before = emu.rss_mb()
+        tally = AbuseTally()
+        probe = start_probe(emu.host, emu.port, seconds, "ABUSE_PROBE")
+
+        async def attack() -> None:
+            tasks = [asyncio.create_task(a(emu.host, emu.port, tally)) for a in abusers]
+            await asyncio.sleep(seconds)
+            for task in tasks:
+                task.cancel()
+            for outcome in await asyncio.gather(*tasks, return_exceptions=True):
+                if isinstance(outcome, Exception):
+                    tally.errors += 1
+
+        asyncio.run(attack())
+        result = probe.result()
+        growth = emu.rss_mb() - before
+        return result, tally, growth
+
+    def check(self, result: ProbeResult, tally: AbuseTally, growth: float) -> None:
+        assert self.emu.alive()
+        assert result.errors == 0 and result.wrong == 0, result.notes
+        assert result.requests > 100, result
+        assert result.p99_ms <= P99_MS and result.max_ms <= MAX_MS, result
+        assert tally.wrong == 0, tally
+        assert growth <= RSS_GROWTH_MB, growth
+        assert self.emu.rss_mb() - self.baseline <= RSS_GROWTH_MB
+
+
+def _session(*args: str) -> Iterator[Session]:
+    emu = EmulatorProcess(*args).start()
+    try:
+        session = Session(emu)
+        result, _, _ = session.abuse([], seconds=0.5)  # warm up: caches, first formatting
+        assert result.wrong == 0 and result.errors == 0, result.notes
+        session.baseline = emu.rss_mb()
+        yield session
+    finally:
+        assert emu.stop() == 0  # and it still stops cleanly on SIGTERM
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Session]:
+    dat = tmp_path_factory.mktemp("abuse") / "abuse.dat"
+    dat.write_text(CONFIG)
+    yield from _session("--config", str(dat), "--max-clients", "30")
+
+
+def test_garbage_frames_with_a_bystander(session: Session) -> None:
+    abusers: list[Abuser] = [
+        lambda h, p, t, seed=seed: garbage(h, p, t, seed=seed) for seed in range(4)
+    ]
+    result, tally, growth = session.abuse(abusers)
+    session.check(result, tally, growth)
+    assert tally.connections > 20  # the garbage really went in, connection after connection
+
+
+def test_non_reading_clients(session: Session) -> None:
+    result, tally, growth = session.abuse([non_reader] * 10)
+    session.check(result, tally, growth)
+    assert tally.connections == 10 and tally.requests >= 10 * 200
+
+
+def test_distinct_long_names(session: Session) -> None:
+    result, tally, growth = session.abuse([long_names, long_names])
+    session.check(result, tally, growth)
+    assert tally.replies >= 200  # 200 distinct 65 000-character names at least
+
+
+def test_pipelined_costly_requests(session: Session) -> None:
+    def words(h: str, p: int, t: AbuseTally) -> Coroutine[Any, Any, None]:
+        return mode3_flood(h, p, t, name="ABUSE_WORDS")
+
+    result, tally, growth = session.abuse([costly_pipeline, words, costly_pipeline])
+    session.check(result, tally, growth)
+    assert tally.replies >= 1200  # at least two whole 300-pair segments
+
+
+def _read(host: str, port: int, name: str) -> str:
+    with socket.create_connection((host, port), timeout=5) as sock:
+        sock.sendall(encode_read(1, name))
+        decoder = ReplyDecoder()
+        while not (replies := decoder.feed_replies(sock.recv(4096))):
+            pass
+    return replies[0].text
+
+
+def test_runaway_krl(tmp_path: Path) -> None:
+    src = tmp_path / "runaway.src"
+    src.write_text(RUNAWAY_KRL)
+    dat = tmp_path / "abuse.dat"
+    dat.write_text(CONFIG)
+    for session in _session("--config", str(dat), "--program", str(src)):
+        result, tally, growth = session.abuse([costly_pipeline])
+        session.check(result, tally, growth)
+        emu = session.emu
+        assert _read(emu.host, emu.port, "$PRO_STATE1") == "#P_ACTIVE"  # still running
