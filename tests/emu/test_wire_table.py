@@ -198,10 +198,9 @@ TABLE: tuple[Row, ...] = (
         Outcome("0005 0000")),
     # --- left-overs and modes 2/3.
     # Right() leaves "00000000": id 0000, L = 0, Asc(Mid(.., 5, 1)) raises: nothing more.
-    # The robust mode's framer rejects the L = 0 header before the read of the same chunk is
-    # dispatched, so that read goes unanswered too (a robust-mode wart, docs/emulator.md).
+    # The robust mode answers the read before the L = 0 header, then closes.
     Row("T1", "four zero bytes after a read", (read(1) + "00000000",), a100(1),
-        Outcome("", "closed")),
+        Outcome(a100(1), "closed")),
     # Case 2: CLng("{E6AXIS:") is error 13; readMsg has no handler, so errRead ends the read.
     Row("T2", "mode 2 of a struct, then a read, in one read",
         ("0001 0009 02 0006 4D5941584953" + read(2),), "",
