@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from functools import partial
+from functools import lru_cache, partial
 from importlib.metadata import PackageNotFoundError, version
 from typing import Protocol, cast
 
@@ -48,6 +48,15 @@ log = logging.getLogger(__name__)
 
 #: Cached read texts per variable before its cache starts afresh (bounds memory, not speed).
 TEXT_CACHE_PATHS = 4096
+#: Elements of the largest array a whole-array read can answer: 2 bytes each at least (one
+#: character and a blank as text, one word in mode 2) under the 65 529-byte reply value.
+WHOLE_ARRAY_LIMIT = 32_764
+
+
+@lru_cache(maxsize=65_536)
+def _real_word_text(word: int) -> str:
+    """A mode-3 word stored in a REAL element, as the KRC prints it (cached: 65 536 at most)."""
+    return format_krc4(float(word))
 
 
 def _proxy_version() -> str:
@@ -263,25 +272,43 @@ class VariableStore:
         cache[path] = text
         return text
 
+    def too_long_for_reply(self, name: str) -> bool:
+        """Whether ``name`` is a whole array of more than ``WHOLE_ARRAY_LIMIT`` elements, whose
+        text no KUKAVARPROXY reply can carry: the server answers a failure without formatting
+        it, so the cost of one read stays bounded by the largest reply."""
+        path = parse_name(name)
+        if path is None or path.index != () or path.members:
+            return False
+        var = self._vars.get(path.base)
+        return var is not None and var.is_array and len(var.elems) > WHOLE_ARRAY_LIMIT
+
     def _whole_array_text(self, var: Var, name: str) -> str:
         """``NAME[]`` of a 1-D array from per-element texts, so that after a write to one
-        element a whole-array read formats that element only."""
+        element a whole-array read formats that element only.
+        """
         if len(var.dims) > 1:  # a KRC prints only 1-D arrays whole
             raise UnknownVariable(name)
+        elems = var.elems
         texts = var.elem_text
         if texts is None:
-            texts = var.elem_text = [None] * len(var.elems)
+            if None in elems:
+                raise UnknownVariable(name)
+            if var.spec.kind is Kind.INT:  # str() is the KRC's INT text, mapped in C
+                texts = var.elem_text = list(map(str, elems))
+            else:
+                texts = var.elem_text = [None] * len(elems)
         i = 0
         while True:  # list.index scans in C: a read after one write formats one element
             try:
                 i = texts.index(None, i)
             except ValueError:
                 break
-            elem = var.elems[i]
+            elem = elems[i]
             if elem is None:
                 raise UnknownVariable(name)
-            texts[i] = format_krc4(elem) + " "  # a KRC ends every element with " "
-        return "".join(texts)  # type: ignore[arg-type]  # no None left
+            texts[i] = format_krc4(elem)
+        # A KRC ends every element with a blank.
+        return " ".join(texts) + " "  # type: ignore[arg-type]  # no None left
 
     def write_words(self, name: str, words: Sequence[int]) -> bool:
         """KUKAVARPROXY's mode-3 array write: word ``k`` (0..65535) becomes ``NAME[k]``, one
@@ -304,15 +331,22 @@ class VariableStore:
         ok = True
         if var.ranges is None:
             var.elems[:n] = values
-        else:
-            for i, value in enumerate(values):
-                try:
-                    check_ranges(var.ranges, var.name, value)
-                except Refused:
-                    ok = False
-                    continue
-                var.elems[i] = value
-                ok = True
+            texts = var.elem_text
+            self._text.pop(var.name, None)
+            if texts is not None:  # keep the per-element texts warm: no cold re-formatting
+                if kind is Kind.INT:
+                    texts[:n] = map(str, words[:n])
+                else:
+                    texts[:n] = map(_real_word_text, words[:n])
+            return len(words) <= len(var.elems)
+        for i, value in enumerate(values):  # limits: each element is refused on its own
+            try:
+                check_ranges(var.ranges, var.name, value)
+            except Refused:
+                ok = False
+                continue
+            var.elems[i] = value
+            ok = True
         self._changed(var, None)
         return ok and len(words) <= len(var.elems)
 
@@ -360,7 +394,7 @@ class VariableStore:
                 var.elems = cast("list[KrlValue | None]", list(value))
             else:
                 var.elems[0] = cast("KrlValue", value)
-            self._text.pop(var.name, None)
+            self._changed(var, None)
             return
         reg = self.registry
         if var.is_array and not path.index and not path.members:  # whole array: a list

@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import socket
+import struct
 import time
 import tracemalloc
 
@@ -19,7 +20,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from kukavarproxy_emu import Emulator
-from kukavarproxy_emu.handler import Responder
+from kukavarproxy_emu.handler import Responder, _pack_words, _to_word
 from kukavarproxy_emu.store import VariableStore
 from kukavarproxy_emu.testing import EmulatorFactory, RawClient
 from pyopenshowvar.protocol import (
@@ -298,3 +299,49 @@ def test_bulk_mode3_write_equals_element_by_element(
     expected = _reference_words(stores[0], base, words)
     assert stores[1].write_words(base, words) is expected
     assert stores[1].snapshot() == stores[0].snapshot()
+
+
+def test_whole_array_reads_after_mode3_writes_stay_cheap() -> None:
+    store = VariableStore()
+    store.declare("BIGI", "INT", (32_000,), "0")
+    store.declare("BIGR", "REAL", (30_000,), "0.0")
+    store.declare("HUGE", "INT", (200_000,), "1")
+    responder = Responder(store)
+    payload = bytes(range(256)) * 250  # 32 000 words
+    for name in ("BIGI", "BIGR", "HUGE"):
+        responder.answer(Request(1, Mode.READ, f"{name}[]", None), 1)  # first read: warm-up
+        start = time.process_time()
+        assert responder.answer(Request(2, Mode.WRITE_ARRAY, name, payload), 2).ok is (
+            name != "BIGR"  # 32 000 words, 30 000 elements: the last write fails
+        )
+        as_text = responder.answer(Request(3, Mode.READ, f"{name}[]", None), 3)
+        as_words = responder.answer(Request(4, Mode.READ_ARRAY, f"{name}[]", None), 4)
+        assert time.process_time() - start < 0.05, name  # before: up to seconds
+        assert not as_text.ok  # no text of 30 000 numbers fits a reply
+        if name == "BIGI":  # 32 000 words do fit a mode-2 reply, and they are the ones written
+            assert as_words.ok and as_words.value == payload
+        else:
+            assert as_words.ok is (name == "BIGR")
+    assert (
+        store.read("BIGI[]") == " ".join(str(w) for (w,) in struct.iter_unpack(">H", payload)) + " "
+    )
+    assert store.get("BIGR[2]") == 0x0203 and store.read("BIGR[2]") == "515.000"
+
+
+@given(
+    st.lists(
+        st.one_of(
+            st.integers(-(2**40), 2**40).map(str),
+            st.floats(allow_nan=True, allow_infinity=True).map(repr),
+            st.sampled_from(["2.5", "-0.5", "1E+03", "TRUE", "#T1", "1.5e300", "9007199254740993"]),
+        ),
+        min_size=2,
+        max_size=8,
+    )
+)
+def test_mode2_words_equal_vb_clng_element_by_element(tokens: list[str]) -> None:
+    try:
+        expected: bytes | None = b"".join(struct.pack(">H", _to_word(t)) for t in tokens)
+    except (ValueError, OverflowError):
+        expected = None
+    assert _pack_words(tokens) == expected
