@@ -77,6 +77,8 @@ OUTPUT_LIMIT = 64 * 1024
 SLICE = 0.001
 #: Seconds a closing connection may take to flush its last replies before it is aborted.
 CLOSE_GRACE = 2.0
+#: Seconds a connection that sent garbage has to take the replies owed before the garbage.
+ERROR_GRACE = 10.0
 #: Worker queue: (request, id the reply carries, request number on its connection); None =
 #: close here.
 _Item = tuple[Request, int, int] | None
@@ -385,6 +387,8 @@ class _Connection(asyncio.BufferedProtocol):
         _limited_conn.warning("client %d (%s): %s; closing", self.index, self.peer, clip(str(exc)))
         self.input_done = True
         self._update_reading()
+        # It is owed the replies before the garbage; if it does not take them, cut it off.
+        asyncio.get_running_loop().call_later(ERROR_GRACE, self.abort)
 
     def _finish(self) -> None:
         """Close after the replies already written: the slot is free at once, and a peer that
@@ -415,6 +419,7 @@ class _Connection(asyncio.BufferedProtocol):
             transport.close()
 
     def abort(self) -> None:
+        """Close at once, discarding everything (idempotent: timers call it late)."""
         self.closed = True
         self.emu._forget(self)
         if self.transport is not None and not self.lost:

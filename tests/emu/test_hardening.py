@@ -19,7 +19,8 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from kukavarproxy_emu import Emulator
+from kukavarproxy_emu import Emulator, EmulatorConfig, server
+from kukavarproxy_emu.__main__ import build_parser, config_from_args
 from kukavarproxy_emu.handler import Responder, _pack_words, _to_word
 from kukavarproxy_emu.store import VariableStore
 from kukavarproxy_emu.testing import EmulatorFactory, RawClient
@@ -112,6 +113,35 @@ async def test_idle_drop_of_a_non_reading_client_frees_its_slot(
         assert emu.stats.rejected == 0
     finally:
         sock.close()
+
+
+async def test_garbage_after_unread_requests_frees_the_slot_after_the_grace(
+    emulator_factory: EmulatorFactory, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(server, "ERROR_GRACE", 0.3)
+    emu = await emulator_factory(robot=False, max_clients=1, idle_timeout=0)
+    loop = asyncio.get_running_loop()
+    sock = await raw_socket(emu)
+    try:
+        junk = b"".join(encode_read(i, "$IN[]") for i in range(300)) + H("0001 0000")
+        await loop.sock_sendall(sock, junk)  # then it never reads the replies it is owed
+        for _ in range(200):
+            await asyncio.sleep(0.01)
+            if emu.stats.clients == 0:
+                break
+        assert emu.stats.clients == 0 and emu.stats.protocol_errors == 1
+        async with await connect(emu) as newcomer:
+            assert (await newcomer.request(encode_read(2, "PING")))[7:-3] == b"PONG"
+    finally:
+        sock.close()
+
+
+def test_idle_reset_option_on_the_command_line() -> None:
+    args = build_parser().parse_args(["--idle-reset", "requests"])
+    assert config_from_args(args).idle_reset == "requests"
+    assert config_from_args(build_parser().parse_args([])).idle_reset == "bytes"
+    with pytest.raises(ValueError, match="idle_reset"):
+        EmulatorConfig(idle_reset="sometimes")
 
 
 # --- 3. no request or batch holds the loop -------------------------------------------------
