@@ -15,7 +15,10 @@ the next motion was planned in time, which the kernel decides.
 
 **Budget.** At most :attr:`Interpreter.budget` statements, and at most ``TIME_BUDGET`` (2 ms)
 of wall time, run per cycle, so a ``LOOP`` of assignments only burns a bounded slice of each
-cycle and the server keeps answering promptly. Statements inside user functions count too: a
+cycle and the server keeps answering promptly. The time budget is also never more than a
+quarter (``TIME_SHARE``) of the wall time since the previous cycle ended (and never less than
+0.5 ms), so cycles that come back to back (the IPO clock catching up on a loaded machine, a
+high ``--speed``) shrink it instead of starving the server. Statements inside user functions count too: a
 ``DEFFCT`` called from an expression runs as a generator (:mod:`.interp_expr`) and is
 suspended mid-way like any statement, so a slow or endless function costs each cycle its
 slice and nothing more. Local variables of the live calls hold at most ``LOCAL_ELEMENTS``
@@ -61,6 +64,10 @@ DEFAULT_BUDGET = 2000
 #: Wall seconds of statements per cycle, whichever of the two limits comes first: a runaway loop
 #: then costs the server at most this much latency per cycle, however slow the statements are.
 TIME_BUDGET = 0.002
+#: ... and at most this share of the wall time since the previous cycle ended, but at least
+#: TIME_FLOOR seconds.
+TIME_SHARE = 0.25
+TIME_FLOOR = 0.0005
 #: Statements between two looks at the clock (fewer after a statement on a large array).
 CHECK_EVERY = 16
 #: Elements of all local variables of the routines on the call stack together (8 MB of
@@ -112,6 +119,7 @@ class Interpreter(ExprMixin, MotionMixin):
         self.count = 0  # statements this cycle
         self._until = 0.0  # perf_counter() at which this cycle's time budget ends
         self._check_at = CHECK_EVERY  # statement count at which the clock is read next
+        self._ended = 0.0  # perf_counter() when the last cycle's statements ended
         self.at_once = 0  # motions that completed at once this cycle
         self.total = 0  # statements since start (diagnostics, tests)
         self.finished = False
@@ -139,7 +147,12 @@ class Interpreter(ExprMixin, MotionMixin):
             return
         self.count = self.at_once = 0
         self._check_at = CHECK_EVERY
-        self._until = time.perf_counter() + TIME_BUDGET
+        now = time.perf_counter()
+        # Never more than TIME_SHARE of the wall time since the last cycle ended: when cycles
+        # come back to back (the IPO clock catching up on a starved machine), a runaway program
+        # must not take the loop over, which a fixed 2 ms per cycle would.
+        share = max(TIME_FLOOR, TIME_SHARE * (now - self._ended))
+        self._until = now + min(TIME_BUDGET, share)
         try:
             next(self._gen)
         except StopIteration:
@@ -154,6 +167,8 @@ class Interpreter(ExprMixin, MotionMixin):
         except RecursionError:
             self._gen = None
             raise KrlRuntimeError("call stack overflow (endless recursion?)") from None
+        finally:
+            self._ended = time.perf_counter()
 
     def _main(self) -> Gen:
         yield from self._invoke(self.module.main, (), self.module.main)
