@@ -69,7 +69,7 @@ TIME_BUDGET = 0.002
 TIME_SHARE = 0.25
 TIME_FLOOR = 0.0005
 #: Statements between two looks at the clock (fewer after a statement on a large array).
-CHECK_EVERY = 16
+CHECK_EVERY = 64
 #: Elements of all local variables of the routines on the call stack together (8 MB of
 #: references): a deep recursion with a big local array is an error, not a memory hog.
 LOCAL_ELEMENTS = 1 << 20

@@ -303,13 +303,13 @@ def test_watchdog_ends_a_process_whose_loop_is_held() -> None:
 
 
 class _FakeClock:
-    """``time`` for the interpreter: each reading advances 50 µs; ``wait`` adds a gap."""
+    """``time`` for the interpreter: each reading advances 100 µs; ``wait`` adds a gap."""
 
     def __init__(self) -> None:
         self.now = 100.0
 
     def perf_counter(self) -> float:
-        self.now += 50e-6
+        self.now += 100e-6
         return self.now
 
     def wait(self, seconds: float) -> None:
@@ -330,6 +330,6 @@ def test_back_to_back_cycles_get_a_smaller_time_budget(
         before = prog.interp.total
         prog.interp.step()
         ran.append(prog.interp.total - before)
-    checks = [n // interp.CHECK_EVERY for n in ran]  # one clock reading per 16 statements
-    # 2 ms on time: 40 readings of 50 µs; back to back: the 0.5 ms floor, 10 readings
-    assert checks == [40, 10, 10, 40], ran
+    checks = [n // interp.CHECK_EVERY for n in ran]  # one clock reading per 64 statements
+    # on time: 2 ms are over after 20 readings of 100 µs; back to back: the 0.5 ms floor, 5
+    assert checks == [20, 5, 5, 20], ran
