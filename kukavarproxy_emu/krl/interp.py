@@ -18,12 +18,12 @@ of wall time, run per cycle, so a ``LOOP`` of assignments only burns a bounded s
 cycle and the server keeps answering promptly. The time budget is also never more than a
 quarter (``TIME_SHARE``) of the wall time since the previous cycle ended (and never less than
 0.5 ms), so cycles that come back to back (the IPO clock catching up on a loaded machine, a
-high ``--speed``) shrink it instead of starving the server. Statements inside user functions count too: a
-``DEFFCT`` called from an expression runs as a generator (:mod:`.interp_expr`) and is
-suspended mid-way like any statement, so a slow or endless function costs each cycle its
-slice and nothing more. Local variables of the live calls hold at most ``LOCAL_ELEMENTS``
-elements together (one array at most ``datfile.MAX_ELEMENTS``). A motion
-that completes at once (the robot already stands on its target) may run once per cycle
+high ``--speed``) shrink it instead of starving the server. Statements inside user functions
+count too: a ``DEFFCT`` called from an expression runs as a generator (:mod:`.interp_expr`)
+and is suspended mid-way like any statement, so a slow or endless function costs each cycle
+its slice and nothing more. Local variables of the live calls hold at most ``LOCAL_ELEMENTS``
+elements together (one array at most ``datfile.MAX_ELEMENTS``). A motion that completes at
+once (the robot already stands on its target) may run once per cycle
 before the loop yields, so ``LOOP PTP MYAXIS C_PTP ENDLOOP`` does not spin at rest.
 
 The **submit interpreter** (``submit=True``) has no kernel: motions are errors, WAIT does not
