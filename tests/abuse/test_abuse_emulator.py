@@ -38,7 +38,7 @@ pytestmark = [
     pytest.mark.timeout(90),
 ]
 
-SECONDS = 4.0
+SECONDS = 3.0
 RSS_GROWTH_MB = 50.0
 P99_MS = 20.0
 MAX_MS = 100.0
