@@ -14,6 +14,7 @@ EOF on stdin stops it. Not a public tool: the benchmark scripts start it via
 from __future__ import annotations
 
 import asyncio
+import gc
 import json
 import os
 import resource
@@ -58,6 +59,7 @@ async def _serve(argv: list[str]) -> None:
     config = config_from_args(build_parser().parse_args(argv))
     loop = asyncio.get_running_loop()
     async with Emulator(config) as emu:
+        gc.freeze()  # as kukavarproxy-emu does: the start-up heap is never scanned again
         print(f"listening on {emu.host}:{emu.port}", flush=True)
         while True:
             # a thread blocks on stdin, so the loop (and the IPO clock) never waits for it

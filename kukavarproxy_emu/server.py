@@ -82,8 +82,9 @@ ERROR_GRACE = 10.0
 #: Worker queue: (request, id the reply carries, request number on its connection); None =
 #: close here.
 _Item = tuple[Request, int, int] | None
-#: Fast-path backlog: (frame, legacy id or None); None = close here.
-_Frame = tuple[bytes, int | None] | None
+#: Fast-path backlog: a frame, or (frame, id) with the legacy-ids quirk; None = close here.
+#: Plain frames keep a big backlog free of per-request objects for the garbage collector.
+_Frame = bytes | tuple[bytes, int] | None
 
 
 @dataclass
@@ -239,7 +240,10 @@ class _Connection(asyncio.BufferedProtocol):
         if error is not None:
             self._protocol_error(error)
         if self.worker is None and not emu.slow:
-            self.backlog.extend([(frame, legacy_id) for frame in frames])
+            if legacy_id is None:
+                self.backlog.extend(frames)
+            else:
+                self.backlog.extend([(frame, legacy_id) for frame in frames])
             if error is not None:
                 self.backlog.append(None)
             if not self._scheduled:
@@ -284,9 +288,12 @@ class _Connection(asyncio.BufferedProtocol):
                 if item is None:
                     break
                 backlog.popleft()
-                frame, legacy_id = item
-                request = decode_request(frame)
-                msg_id = request.msg_id if legacy_id is None else legacy_id
+                if isinstance(item, tuple):
+                    request = decode_request(item[0])
+                    msg_id = item[1]
+                else:
+                    request = decode_request(item)
+                    msg_id = request.msg_id
                 reply = encode_reply(answer(request, msg_id))
                 out.append(reply)
                 size += len(reply)

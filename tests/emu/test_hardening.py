@@ -12,6 +12,9 @@ import asyncio
 import logging
 import socket
 import struct
+import subprocess
+import sys
+import textwrap
 import time
 import tracemalloc
 
@@ -224,6 +227,32 @@ def test_largest_mode3_frame_is_cheap_and_exact() -> None:
     assert store.get("LIMITED") == [10.0, 0.0, 20.0, 50.0]
     for name in ("$IN", "MYE6ARRAY", "MYSTRING", "NOPE", "OUTPUT_VARS"):  # no digits there
         assert not responder.answer(Request(4, Mode.WRITE_ARRAY, name, b"\x00\x01"), 4).ok
+
+
+def test_the_emulator_process_freezes_its_start_up_heap() -> None:
+    # A full collection over the start-up heap (store, robot, numpy, physics) paused the loop
+    # for ~90 ms under a flood of requests; kukavarproxy-emu freezes that heap after start.
+    script = textwrap.dedent(
+        """
+        import asyncio, gc, os, signal
+        from kukavarproxy_emu import EmulatorConfig
+        from kukavarproxy_emu.__main__ import serve
+        async def main():
+            task = asyncio.create_task(serve(EmulatorConfig(port=0, discovery=False)))
+            for _ in range(500):
+                await asyncio.sleep(0.01)
+                if gc.get_freeze_count():
+                    break
+            print("frozen", gc.get_freeze_count() > 10_000, flush=True)
+            os.kill(os.getpid(), signal.SIGTERM)
+            await task
+        asyncio.run(main())
+        """
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=60, check=False
+    )
+    assert "frozen True" in proc.stdout, proc.stderr[-2000:]
 
 
 # --- 4. requests before a malformed header -------------------------------------------------
