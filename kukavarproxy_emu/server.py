@@ -13,7 +13,12 @@ Layers, top down:
   semantics (reference §2.4, §4.1), no I/O.
 
 Each connection has two paths. The fast path (no latency, no armed faults, nothing queued)
-answers everything one TCP read delivered and sends all replies with one ``transport.write``.
+answers what one TCP read delivered at once, for up to ``IMMEDIATE`` seconds, and sends the
+replies with one ``transport.write``; a bigger batch waits in the connection's backlog for the
+emulator's rounds (``Emulator._round``: once per event-loop iteration, every connection with a
+backlog in turn, ``SLICE`` each and ``ROUND`` in all). The socket is not read while a backlog
+waits, nor while ``OUTPUT_LIMIT`` reply bytes wait unsent (the client is not reading), so
+memory and work per connection stay bounded whatever it sends (docs/emulator.md, "Bounds").
 The queued path hands requests to a per-connection worker task that waits for the global
 :class:`~kukavarproxy_emu.latency.ServiceQueue` and applies faults; the socket stops being read
 while ``max_pending`` requests wait or while the client is not reading its replies, so one
@@ -66,15 +71,22 @@ log = logging.getLogger(__name__)
 _limited_conn = RateLimitedLog(log, burst=20)
 
 _U16 = struct.Struct(">H")
-#: Bytes read from a socket per event: bounds the requests one read can queue.
-READ_SIZE = 32 * 1024
+#: Bytes read from a socket per event: bounds the requests one read can queue, and the work
+#: of framing them (~0.2 ms for 8 KiB of the smallest requests).
+READ_SIZE = 8 * 1024
 #: Reply bytes a connection may hold unsent: beyond it the connection stops answering and
 #: reading until the client has taken its replies (output backpressure). A connection's unsent
 #: output therefore never exceeds OUTPUT_LIMIT plus one reply (< 64 KiB).
 OUTPUT_LIMIT = 64 * 1024
-#: Seconds of request handling one connection gets per event-loop iteration; the rest of its
-#: batch waits for the next iteration, so other clients and the IPO clock get their turn.
+#: Seconds of request handling a connection gets right away when a read arrives: a client
+#: with a few requests is answered at once, a big batch goes on in the rounds below.
+IMMEDIATE = 0.0003
+#: Seconds of request handling one connection gets per round at most ...
 SLICE = 0.001
+#: ... and all connections with work left together, per event-loop iteration (a round):
+#: however many clients flood the emulator, one iteration answers for at most this long, so
+#: other clients and the IPO clock get their turn.
+ROUND = 0.002
 #: Seconds a closing connection may take to flush its last replies before it is aborted.
 CLOSE_GRACE = 2.0
 #: Seconds a connection that sent garbage has to take the replies owed before the garbage.
@@ -144,6 +156,7 @@ class _Connection(asyncio.BufferedProtocol):
         self.lost = False
         self._write_paused = False
         self._reading_paused = False
+        #: Waiting in the emulator's round (``Emulator._enqueue``).
         self._scheduled = False
         self._drained: asyncio.Future[None] | None = None
         self._rbuf = memoryview(bytearray(READ_SIZE))
@@ -228,7 +241,7 @@ class _Connection(asyncio.BufferedProtocol):
         if self._drained is not None and not self._drained.done():
             self._drained.set_result(None)
         if self.backlog and not self._scheduled:
-            self._schedule()
+            self.emu._enqueue(self)
         self._update_reading()
 
     # -- request handling -----------------------------------------------------------------
@@ -247,7 +260,7 @@ class _Connection(asyncio.BufferedProtocol):
             if error is not None:
                 self.backlog.append(None)
             if not self._scheduled:
-                self._serve()
+                self._serve(IMMEDIATE)
             return
         for frame in frames:
             try:
@@ -265,11 +278,11 @@ class _Connection(asyncio.BufferedProtocol):
         if self.worker is None and self.queue:
             self.worker = asyncio.get_running_loop().create_task(self._work())
 
-    def _serve(self) -> None:
-        """Answer backlog frames for at most ``SLICE`` seconds and until ``OUTPUT_LIMIT`` reply
-        bytes wait unsent; the rest waits for the next loop iteration or for the client to
-        read (reading stays paused meanwhile, so the backlog never grows beyond one read)."""
-        self._scheduled = False
+    def _serve(self, budget: float) -> None:
+        """Answer backlog frames for at most ``budget`` seconds (one at least) and until
+        ``OUTPUT_LIMIT`` reply bytes wait unsent; the rest waits for the emulator's next round
+        or for the client to read (reading stays paused meanwhile, so the backlog never grows
+        beyond one read)."""
         transport = self.transport
         backlog = self.backlog
         if transport is None or self.lost or self._write_paused:
@@ -279,7 +292,7 @@ class _Connection(asyncio.BufferedProtocol):
             emu.robot.clock.poll()
         answer = self.responder.answer
         room = OUTPUT_LIMIT - transport.get_write_buffer_size()
-        deadline = time.perf_counter() + SLICE
+        deadline = time.perf_counter() + budget
         out: list[bytes] = []
         size = 0
         try:
@@ -316,12 +329,8 @@ class _Connection(asyncio.BufferedProtocol):
             self._finish()
             return
         if backlog and not self._write_paused:
-            self._schedule()
+            emu._enqueue(self)
         self._update_reading()
-
-    def _schedule(self) -> None:
-        self._scheduled = True
-        asyncio.get_running_loop().call_soon(self._serve)
 
     async def _work(self) -> None:
         emu = self.emu
@@ -469,6 +478,9 @@ class Emulator:
         self.udp_port: int | None = None
         self._server: asyncio.Server | None = None
         self._connections: dict[int, _Connection | Kvp9Connection] = {}
+        #: Connections with requests left to answer, served in rounds (see ROUND).
+        self._ready: deque[_Connection] = deque()
+        self._round_pending = False
         self._last_index = 0
         self._idle_task: asyncio.Task[None] | None = None
         self._discovery: asyncio.DatagramTransport | None = None
@@ -648,6 +660,32 @@ class Emulator:
         self.stats.connections += 1
         self.stats.clients = len(self._connections)
         return True
+
+    def _enqueue(self, conn: _Connection) -> None:
+        """Serve ``conn``'s backlog in the next round (once per round, in arrival order)."""
+        if conn._scheduled:
+            return
+        conn._scheduled = True
+        self._ready.append(conn)
+        if not self._round_pending:
+            self._round_pending = True
+            asyncio.get_running_loop().call_soon(self._round)
+
+    def _round(self) -> None:
+        """One event-loop iteration's share of the backlogs: every waiting connection in turn,
+        for ``ROUND`` seconds in all; those not reached go first in the next round."""
+        self._round_pending = False
+        ready = self._ready
+        end = time.perf_counter() + ROUND
+        for _ in range(len(ready)):
+            conn = ready.popleft()
+            conn._scheduled = False
+            conn._serve(min(SLICE, end - time.perf_counter()))  # one request at least
+            if time.perf_counter() >= end:
+                break
+        if ready and not self._round_pending:
+            self._round_pending = True
+            asyncio.get_running_loop().call_soon(self._round)
 
     def _forget(self, conn: _Connection | Kvp9Connection) -> None:
         """Free ``conn``'s slot (as soon as it is closing, before the socket is gone)."""
