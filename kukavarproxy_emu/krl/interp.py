@@ -18,7 +18,8 @@ of wall time, run per cycle, so a ``LOOP`` of assignments only burns a bounded s
 cycle and the server keeps answering promptly. The time budget is also never more than a
 quarter (``TIME_SHARE``) of the wall time since the previous cycle ended (and never less than
 0.5 ms), so cycles that come back to back (the IPO clock catching up on a loaded machine, a
-high ``--speed``) shrink it instead of starving the server. Statements inside user functions
+high ``--speed``) shrink it instead of starving the server. Planning a ``LIN`` (in slices,
+bounded work) keeps the full 2 ms per cycle, as the robot's timing depends on it. Statements inside user functions
 count too: a ``DEFFCT`` called from an expression runs as a generator (:mod:`.interp_expr`)
 and is suspended mid-way like any statement, so a slow or endless function costs each cycle
 its slice and nothing more. Local variables of the live calls hold at most ``LOCAL_ELEMENTS``
@@ -118,6 +119,9 @@ class Interpreter(ExprMixin, MotionMixin):
         self.ev = Evaluator(store, self.frames, self._call_function)
         self.count = 0  # statements this cycle
         self._until = 0.0  # perf_counter() at which this cycle's time budget ends
+        #: ... and the motion planning's (a LIN planned in slices): the full TIME_BUDGET, so
+        #: a high --speed does not stretch a LIN's planning over more simulated time.
+        self._plan_until = 0.0
         self._check_at = CHECK_EVERY  # statement count at which the clock is read next
         self._ended = 0.0  # perf_counter() when the last cycle's statements ended
         self.at_once = 0  # motions that completed at once this cycle
@@ -153,6 +157,7 @@ class Interpreter(ExprMixin, MotionMixin):
         # must not take the loop over, which a fixed 2 ms per cycle would.
         share = max(TIME_FLOOR, TIME_SHARE * (now - self._ended))
         self._until = now + min(TIME_BUDGET, share)
+        self._plan_until = now + TIME_BUDGET
         try:
             next(self._gen)
         except StopIteration:

@@ -46,7 +46,7 @@ class MotionMixin:
     store: VariableStore
     ev: Evaluator
     at_once: int
-    _until: float
+    _plan_until: float
 
     def _stop_if_reads(self, *exprs: ast.Expr | None) -> Generator[str, None, None]:
         raise NotImplementedError  # provided by Interpreter
@@ -85,7 +85,7 @@ class MotionMixin:
             job = self._plan(kernel, stmt.kind, target, approx, label, stmt, tool=tool)
             # A LIN is planned in slices within this cycle's time budget; the advance run
             # stays on the statement until it is planned (or refused), as on a KRC.
-            while job is not None and not job.step(self._until):
+            while job is not None and not job.step(self._plan_until):
                 yield WAIT
         except MotionRefused as exc:
             raise KrlRuntimeError(str(exc), stmt) from None
