@@ -26,6 +26,7 @@ __all__ = [
     "save_figure",
     "save_plot",
     "summary_table",
+    "verdict",
     "write_csv",
 ]
 
@@ -156,22 +157,37 @@ def save_plot(
 
 
 def _fmt(value: float) -> str:
-    if isinstance(value, float) and not math.isfinite(value):
-        return str(value)
+    """A compact number; ``n/a`` for NaN/inf (a metric that could not be measured)."""
+    if not math.isfinite(value):
+        return "n/a"
     if isinstance(value, int) or float(value).is_integer():
         return f"{value:.0f}"
     return f"{value:.3g}" if abs(value) < 100 else f"{value:.1f}"
 
 
-def _verdict(ours: float, thesis: str) -> str:
-    """``better`` / ``worse`` / ``same`` / ``""`` comparing ``ours`` with a thesis bound text.
+#: A reference value within this fraction of ours is "similar".
+TOLERANCE = 0.25
 
-    Thesis bounds are written as ``"< 5"`` (an upper bound: lower is better), ``"> 20"``
-    (a lower bound: higher is better) or ``"≈ 10"`` (a reference value: ``similar`` within
-    25 %, else no verdict because neither direction is intrinsically better).
+
+def _lower_is_better(metric: str) -> bool | None:
+    """Errors, delays and times are better small; None when the name says nothing."""
+    name = metric.lower()
+    if any(k in name for k in ("err", "_ms", "lag", "overhead", "rms", "max_")):
+        return True
+    return None
+
+
+def verdict(ours: float, thesis: str, lower_is_better: bool | None = None) -> str:
+    """``better`` / ``worse`` / ``similar`` / ``differs`` / ``""`` for ``ours`` against a
+    thesis figure.
+
+    ``"< 5"`` is an upper bound (lower is better), ``"> 20"`` a lower bound; ``"≈ 4.27"`` a
+    measured value: within :data:`TOLERANCE` it is ``similar``; beyond it ``better`` or
+    ``worse`` when the metric has a direction (``lower_is_better``), else ``differs``. A thesis
+    figure without a number (``"plots only"``) or a metric we could not measure gets ``""``.
     """
     match = re.search(r"[-+]?\d+(?:\.\d+)?", thesis)
-    if match is None:
+    if match is None or not math.isfinite(ours):
         return ""
     bound = float(match.group())
     text = thesis.strip()
@@ -179,26 +195,30 @@ def _verdict(ours: float, thesis: str) -> str:
         return "better" if ours < bound else "worse"
     if text.startswith((">", "≥")):
         return "better" if ours > bound else "worse"
-    if text.startswith(("≈", "~")) and bound:
-        # a reference value: call it "similar" within 25 %, otherwise leave it to the reader
-        return "similar" if abs(ours - bound) <= 0.25 * abs(bound) else ""
-    return ""
+    if abs(ours - bound) <= TOLERANCE * abs(bound):
+        return "similar"
+    if lower_is_better is None:
+        return "differs"
+    return "better" if (ours < bound) == lower_is_better else "worse"
 
 
-def summary_table(results: Iterable[CaseResult], title: str = "Case studies") -> Table:
-    """One rich table: case study, metric, ours, thesis, verdict.
+def summary_table(
+    results: Iterable[CaseResult], title: str = "Case studies", *, width: int = 80
+) -> Table:
+    """One rich table that fits ``width`` columns: case study, metric, ours, thesis, verdict.
 
     A result whose metrics are empty but which has a ``status`` thesis entry (e.g. "not
     available") is shown as one row with that status, so the demo lists every case study.
+    Long metric names wrap instead of being cut.
     """
     from rich.table import Table
 
-    table = Table(title=title)
-    table.add_column("case study")
-    table.add_column("metric", no_wrap=True)
-    table.add_column("ours", justify="right")
-    table.add_column("thesis", justify="right")
-    table.add_column("better/worse")
+    table = Table(title=title, width=width, pad_edge=False, collapse_padding=True)
+    table.add_column("study", ratio=2, overflow="fold")
+    table.add_column("metric", ratio=5, overflow="fold")
+    table.add_column("ours", justify="right", ratio=2, no_wrap=True)
+    table.add_column("thesis", justify="right", ratio=2, overflow="fold")
+    table.add_column("verdict", ratio=2, no_wrap=True)
     for result in results:
         first = True
         if not result.metrics:
@@ -211,7 +231,7 @@ def summary_table(results: Iterable[CaseResult], title: str = "Case studies") ->
                 key,
                 _fmt(value),
                 thesis or "-",
-                _verdict(value, thesis) if thesis else "",
+                verdict(value, thesis, _lower_is_better(key)) if thesis else "",
             )
             first = False
     return table

@@ -2,33 +2,30 @@
 
 A simulated 3-DOF haptic device (an omega.7 stand-in: handle position in, force out) is held by
 an operator modelled as a spring-damper pulling the handle towards where the hand wants to go.
-The handle's offset from its centre sets the *direction* of motion (not scaled to the robot's
-workspace, as in the thesis): the robot follows through MYPOS and the ACTUATOR program
-(Algorithm 4.12, ``LOOP PTP_REL MYPOS C_PTP``). Each cycle:
+The handle's offset from its centre sets the *direction* of motion: the robot follows through
+MYPOS and the ACTUATOR program (Algorithm 4.12, ``LOOP PTP_REL MYPOS C_PTP``). The force the
+robot meets is estimated from its motor torques and rendered on the handle, so the operator
+feels the environment push back.
 
-1. ``read_joint_angles()`` and ``read_joint_torques()`` (one round trip each);
-2. τ_ext = τ − τ_gravity(θ, $LOAD) — our mass model, the same one the emulator publishes;
-3. solve Jᵀ F = τ_ext (eq. 4.5) for the TCP force by regularised least squares
-   (:func:`estimate_force`), and render −F × gain on the handle (the operator feels the
-   environment push back);
-4. the virtual environment (a wall: a spring when the TCP crosses a plane; optionally a constant
-   payload) is evaluated at the TCP and applied as ``EMU_WRENCH`` — over KVP by default, or by
-   any ``environment`` callable (``emu.robot.apply_wrench`` in process) — so the true force is
-   known and the estimate can be scored.
+**The estimate** is the app's own (:mod:`.haptic_model`): the library's gravity and point-mass
+inertia driven by the measured motion, plus rotor inertia and friction that
+:func:`calibrate` identifies on the robot before the run (a short free-space motion), and a
+tare offset measured at rest; then Jᵥᵀ F = τ_ext (eq. 4.5). Each cycle reads one consistent
+IPO cycle's speeds, torques and axes (:mod:`.haptic_io`). While the arm stands still the
+estimate is the mean over the cycles since it stopped (:class:`~.haptic_model.RestAverage`).
+The app limits the axis acceleration (``$ACC_AXIS``, default 20 %) as a hand-guided motion
+should be gentle.
 
-**Estimator.** The device is 3-DOF, so we solve for the force only: Jᵥᵀ F = τ is 6 equations in
-3 unknowns, well conditioned even where the full 6×6 Jᵀ is singular — HOME, where ACTUATOR
-starts, has A5 = 0 and there the 6-D ``torques_to_wrench`` loses ~8 N of a 50 N force into the
-wrist singularity's null space. ``estimator="wrench"`` uses ``torques_to_wrench`` for comparison.
-
-**What is scored.** The emulator's torque adds I·q̈ (a diagonal inertia) while the axes
-accelerate, and q and τ come from two reads that an IPO tick may fall between. Neither is a
-force, so the error is scored on *settled* samples (the axes identical before and after the
-torque read, the applied wrench unchanged); the error while moving is reported separately.
+**What is scored** — against forces our estimator did not produce: a contact the arm makes with
+an object in the simulation (``emu.robot.plant.truth.contact``) and ``EMU_WRENCH`` (a virtual
+wall or payload the test harness applies). ``truth`` returns the true TCP force; without it on
+a real robot the errors are NaN. Settled samples (the app's rest average) and moving samples
+(fresh per-cycle estimates) are scored separately (:mod:`.haptic_report`).
 """
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
@@ -38,29 +35,37 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from pyopenshowvar.kinematics import (
-    KR6R900SIXX,
-    Load,
-    forward,
-    gravity_torques,
-    jacobian,
-    torques_to_wrench,
-)
-from pyopenshowvar_apps.casestudies.common import (
-    CaseResult,
-    new_figure,
-    output_dir,
-    save_figure,
-    write_csv,
-)
+from pyopenshowvar.kinematics import KR6R900SIXX, Load, forward, frame_to_matrix
+from pyopenshowvar_apps.casestudies.common import CaseResult
 from pyopenshowvar_apps.casestudies.devices import Clock
+from pyopenshowvar_apps.casestudies.haptic_io import CycleReader, Reading
+from pyopenshowvar_apps.casestudies.haptic_model import (
+    ForceEstimator,
+    JointTerms,
+    NominalDynamics,
+    RestAverage,
+    identify,
+    tare,
+)
+from pyopenshowvar_apps.casestudies.haptic_report import report
 
-__all__ = ["HapticDevice", "Wall", "estimate_force", "operator_script", "run_haptic"]
+__all__ = [
+    "HapticDevice",
+    "Wall",
+    "calibrate",
+    "leave_singularity",
+    "operator_script",
+    "run_haptic",
+]
 
 FloatArray = npt.NDArray[np.float64]
+log = logging.getLogger(__name__)
 MODEL = KR6R900SIXX
+#: Fewest cycles of free motion the friction identification is run on.
+MIN_IDENT_CYCLES = 20
 G = 9.81
 Environment = Callable[[FloatArray], Awaitable[None] | None]
+Truth = Callable[[], npt.ArrayLike]
 
 
 @dataclass(frozen=True)
@@ -94,8 +99,9 @@ class HapticDevice:
         self.v = np.zeros(3)  # mm/s
 
     def step(self, hand: npt.ArrayLike, force: npt.ArrayLike, dt: float) -> FloatArray:
-        """Integrate ``dt`` s (1 ms semi-implicit Euler substeps: the hand spring is stiff)."""
-        n = max(1, math.ceil(dt / 0.001))
+        """Integrate ``dt`` s (semi-implicit Euler in 4 ms substeps: the hand spring's period is
+        ~0.25 s, so ω·h ≈ 0.1)."""
+        n = max(1, math.ceil(dt / 0.004))
         h, f, sub = np.asarray(hand, float), np.asarray(force, float), dt / n
         for _ in range(n):
             total = self.k_hand * (h - self.p) - self.b_hand * self.v + f  # N
@@ -106,11 +112,11 @@ class HapticDevice:
 
 def operator_script(duration: float) -> Callable[[float], FloatArray]:
     """Where the operator's hand pulls the handle (mm): like Figure 4.19, lift up first, then
-    down and forward with a sideways touch — into the wall — hold, and let go."""
-    keys = np.array([0.0, 0.1, 0.25, 0.35, 0.45, 0.8, 0.9, 1.0]) * duration
+    sideways and down, then forward — into whatever is in front — hold, and let go."""
+    keys = np.array([0.0, 0.08, 0.22, 0.3, 0.42, 0.5, 0.8, 0.86, 1.0]) * duration
     pts = np.array(
-        [[0, 0, 0], [0, 0, 50], [0, 0, 50], [0, 20, -20], [50, 0, 0], [50, 0, 0], [0, 0, 0],
-         [0, 0, 0]], dtype=float,
+        [[0, 0, 0], [0, 0, 40], [0, 0, 40], [0, 30, -15], [0, 30, -15], [50, 0, 0], [50, 0, 0],
+         [0, 0, 0], [0, 0, 0]], dtype=float,
     )  # fmt: skip
 
     def at(t: float) -> FloatArray:
@@ -119,27 +125,95 @@ def operator_script(duration: float) -> Callable[[float], FloatArray]:
     return at
 
 
-def estimate_force(
-    q: npt.ArrayLike,
-    tau: npt.ArrayLike,
-    load: Load | None = None,
-    *,
-    tool: Any = None,
-    estimator: Literal["force", "wrench"] = "force",
-    damping: float = 1e-3,
-) -> FloatArray:
-    """The force (N, base axes) the TCP exerts on the environment from measured torques.
+def _mypos(inc: npt.ArrayLike, b: float = 0.0) -> str:
+    """MYPOS text; all six members, so no rotation is left over from an earlier write."""
+    x, y, z = np.asarray(inc, float)
+    return f"{{X {x:.1f}, Y {y:.1f}, Z {z:.1f}, A 0.0, B {b:.1f}, C 0.0}}"
 
-    τ_ext = τ − gravity(q, load); ``"force"`` solves (AᵀA + λ²I) F = Aᵀτ_ext with A = Jᵥᵀ in
-    m/rad (Tikhonov-regularised least squares); ``"wrench"`` takes the force part of
-    ``torques_to_wrench`` (6-D damped least squares).
-    """
-    tau_ext = np.asarray(tau, float) - gravity_torques(MODEL, q, load)
-    if estimator == "wrench":
-        return np.asarray(torques_to_wrench(MODEL, q, tau_ext, tool=tool), float)[:3]
-    a = np.asarray(jacobian(MODEL, q, tool=tool), float)[:3].T / 1000.0  # Nm per N
-    lhs = a.T @ a + damping**2 * np.eye(3)
-    return np.asarray(np.linalg.solve(lhs, a.T @ (MODEL.torque_sign * tau_ext)), float)
+
+async def leave_singularity(
+    client: Any, reader: CycleReader, clock: Clock, *, a5_deg: float = 30.0, timeout: float = 10.0
+) -> None:
+    """Tilt the tool (MYPOS rotations about base Y at the TCP) until |A5| ≥ ``a5_deg``.
+
+    ACTUATOR starts at HOME, where A5 = 0 is the wrist singularity: there a sideways Cartesian
+    increment can only be followed by swinging A4 and A6 through ±90° or more (measured: A4
+    ran to 184°, near its 185° limit, within 3 s of sideways hand motion), which is neither
+    gentle nor what the operator asked for. The TCP position does not change."""
+    r = await reader.read()
+    if abs(r.q[4]) >= a5_deg:
+        return
+    await client.write("MYPOS", _mypos((0, 0, 0), b=2.0))
+    deadline = clock.now() + timeout
+    while abs(r.q[4]) < a5_deg and clock.now() < deadline:
+        r = await reader.read()
+    await client.write("MYPOS", _mypos((0, 0, 0)))
+    if abs(r.q[4]) < a5_deg:
+        raise RuntimeError(f"the wrist did not leave the singularity (A5 = {r.q[4]:.1f}°)")
+
+
+async def _wait_still(reader: CycleReader, clock: Clock, timeout: float = 3.0) -> Reading:
+    """Read until every axis speed has been zero-ish for a few readings."""
+    deadline, calm = clock.now() + timeout, 0
+    while True:
+        r = await reader.read()
+        calm = calm + 1 if float(np.max(np.abs(r.qd))) < 0.02 else 0
+        if calm >= 4 or clock.now() > deadline:
+            return r
+
+
+async def calibrate(
+    client: Any,
+    reader: CycleReader,
+    dyn: NominalDynamics,
+    clock: Clock,
+    *,
+    rest_cycles: int = 30,
+    amplitude_mm: float = 0.8,
+    step_s: float = 0.35,
+    identify_joints: bool = True,
+) -> tuple[JointTerms, dict[str, float]]:
+    """Tare at rest, then identify rotor inertia and friction on a free-space motion.
+
+    The arm must touch nothing. The motion is six short MYPOS pushes (±Z, ±Y, −X then +X, so
+    it ends where it began and never goes forward first) of ``amplitude_mm`` per PTP_REL —
+    the speeds of the haptic run. ``identify_joints`` False: tare only."""
+    await client.write("MYPOS", _mypos((0, 0, 0)))
+    await _wait_still(reader, clock)
+    q, tau, seen = [], [], set()
+    deadline = clock.now() + rest_cycles * 0.05
+    while len(tau) < rest_cycles and clock.now() < deadline:
+        r = await reader.read()
+        if r.tau_text not in seen:
+            seen.add(r.tau_text)
+            q.append(r.q)
+            tau.append(r.tau)
+    offset, noise = tare(dyn, q, tau)
+    base = JointTerms(offset=offset, noise=noise)
+    info = {"tare_cycles": float(len(tau))}
+    if not identify_joints:
+        return base, info
+    motions, torques = [], []
+    a = amplitude_mm
+    for inc in ((0, 0, a), (0, 0, -a), (0, a, 0), (0, -a, 0), (-a, 0, 0), (a, 0, 0)):
+        await client.write("MYPOS", _mypos(inc))
+        end = clock.now() + step_s
+        while clock.now() < end:
+            r = await reader.read()
+            if r.motion is not None:
+                motions.append(r.motion)
+                torques.append(r.tau)
+    await client.write("MYPOS", _mypos((0, 0, 0)))
+    info["ident_cycles"] = float(len(motions))
+    await _wait_still(reader, clock)
+    if len(motions) < MIN_IDENT_CYCLES:
+        # too few cycles read whole (a machine too busy to read one cycle's speeds and
+        # torques within 12 ms): go on with the tare alone, and say so
+        log.warning("haptic: %d usable cycles, friction not identified", len(motions))
+        return base, info
+    terms, resid = identify(dyn, motions, torques, base)
+    info.update({f"ident_resid_A{i + 1}_Nm": float(v) for i, v in enumerate(resid)})
+    return terms, info
 
 
 async def run_haptic(
@@ -149,149 +223,153 @@ async def run_haptic(
     wall: Wall | None = None,
     payload_kg: float = 0.0,
     environment: Environment | Literal["kvp"] | None = "kvp",
+    truth: Truth | None = None,
+    hand: Callable[[float], FloatArray] | None = None,
     out_dir: str | Path | None = None,
     time_scale: float = 1.0,
     gain: float = 0.25,
     k_inc: float = 0.02,
     dead_zone_mm: float = 5.0,
-    estimator: Literal["force", "wrench"] = "force",
-    period: float = 0.012,
+    accel_percent: float = 20.0,
+    identify_joints: bool = True,
+    tilt: bool = True,
+    period: float = 0.006,
     plots: bool = True,
 ) -> CaseResult:
-    """Run the haptic loop for ``duration`` robot seconds against a running ACTUATOR program.
+    """Calibrate, then run the haptic loop for ``duration`` robot seconds against ACTUATOR.
 
-    ``period`` is the shortest cycle (robot seconds). ``wall`` defaults to a plane 30 mm in front of the start TCP; ``payload_kg`` adds a constant
-    held mass (the TCP pushes up with m·g). ``environment`` applies the true wrench: ``"kvp"``
-    writes EMU_WRENCH, a callable receives the 6-vector, None applies nothing (a real robot
-    touching real things: no ground truth, errors are NaN).
+    ``wall`` (a virtual spring plane applied as EMU_WRENCH through ``environment``; default
+    none) and ``payload_kg`` (a constant held mass: the TCP pushes up with m·g) are the forces
+    the app sets up itself; real contact comes from the robot's world. ``environment``:
+    ``"kvp"`` writes EMU_WRENCH, a callable receives the 6-vector, None applies nothing.
+    ``truth`` returns the true TCP force (N, base axes) for scoring; by default the wrench the
+    app applied (None without an environment: a real robot, errors NaN). ``hand``: where the
+    operator's hand pulls the handle at each time (mm), default :func:`operator_script`.
+    ``identify_joints``
+    False skips the friction/rotor identification (tare only), for comparison. ``tilt``: first
+    leave HOME's wrist singularity (:func:`leave_singularity`).
+    ``period`` is the shortest loop period (robot s): about two readings per IPO cycle.
     """
     clock = Clock(time_scale)
     load = Load.from_krl(await client.read_value("$LOAD"))
-    q = await client.read_joint_angles()
-    x0 = np.asarray(forward(MODEL, q), float)[:3]
-    wall = wall if wall is not None else Wall(0, x0[0] + 30.0)
+    tool_value = await client.read_value("$TOOL")
+    tool = frame_to_matrix(*(float(tool_value[k]) for k in "XYZABC"))  # type: ignore[index]
+    dyn = NominalDynamics(MODEL, load)
+    limit = MODEL.max_accel * accel_percent / 100.0
+    reader = CycleReader(client, clock, model=MODEL, accel_limit=limit)
+    old_acc = await client.read("$ACC_AXIS[]")
     payload = np.array([0, 0, payload_kg * G, 0, 0, 0], float)
+    applied = np.zeros(6)
 
     async def apply(w: FloatArray) -> None:
+        nonlocal applied
+        applied = w
         if environment == "kvp":
-            text = ", ".join(
-                f"{n} {v:.4f}" for n, v in zip(("FX", "FY", "FZ", "MX", "MY", "MZ"), w, strict=True)
-            )
+            names = ("FX", "FY", "FZ", "MX", "MY", "MZ")
+            text = ", ".join(f"{n} {v:.4f}" for n, v in zip(names, w, strict=True))
             await client.write("EMU_WRENCH", "{" + text + "}")
         elif environment is not None:
             maybe = environment(w)
             if maybe is not None:
                 await maybe
 
-    device, hand_at = HapticDevice(), operator_script(duration)
-    applied = wall.wrench(x0) + payload
-    await apply(applied)
-    await client.write("MYPOS", "{X 0.0, Y 0.0, Z 0.0}")
-    await clock.sleep(0.05)  # let a tick publish the torques of the initial wrench
+    def true_force() -> FloatArray:
+        if truth is not None:
+            return np.asarray(truth(), float)[:3]
+        return applied[:3].copy() if environment is not None else np.full(3, math.nan)
+
     rows: list[dict[str, float]] = []
-    last_inc = np.zeros(3)
-    t_prev = clock.now()
+    info: dict[str, float] = {}
     try:
-        while (t := clock.now()) < duration:
-            q = await client.read_joint_angles()
-            tau = await client.read_joint_torques()
-            truth = applied.copy()  # what was applied before this torque read
-            x = np.asarray(forward(MODEL, q), float)[:3]
-            f_est = estimate_force(q, tau, load, estimator=estimator)
-            p = device.step(hand_at(t), -gain * f_est, max(t - t_prev, 0.0))
-            t_prev = t
-            # direction of motion: handle offset beyond a small dead zone; 0.1 mm resolution so
-            # "no input" is an exact zero and the robot really stops
-            norm = float(np.linalg.norm(p))
-            inc = np.round(k_inc * p * max(0.0, 1 - dead_zone_mm / norm) if norm else p, 1)
-            if np.any(inc != last_inc):
-                await client.write("MYPOS", f"{{X {inc[0]:.1f}, Y {inc[1]:.1f}, Z {inc[2]:.1f}}}")
-                last_inc = inc
-            new = wall.wrench(x) + payload
-            if np.max(np.abs(new - applied)) > 0.01:
-                await apply(new)
-                applied = new
-            row = {"t": t, **{f"x_{a}": v for a, v in zip("xyz", x, strict=True)}}
-            row.update({f"q_A{i + 1}": v for i, v in enumerate(q)})
-            row.update({f"tau_A{i + 1}": v for i, v in enumerate(tau)})
-            row.update({f"F_est_{a}": v for a, v in zip("xyz", f_est, strict=True)})
-            row.update({f"F_true_{a}": v for a, v in zip("xyz", truth[:3], strict=True)})
-            row.update({f"handle_{a}": v for a, v in zip("xyz", p, strict=True)})
-            rows.append(row)
-            # no faster than the IPO cycle: the torques cannot change in between, and a loop
-            # spinning on a sped-up in-process emulator would starve its IPO clock
-            await clock.sleep(period - (clock.now() - t))
-    finally:
-        await client.write("MYPOS", "{X 0.0, Y 0.0, Z 0.0}")
         if environment is not None:
             await apply(np.zeros(6))
-    return _report(rows, environment is not None, out_dir, plots)
+        if tilt:
+            await leave_singularity(client, reader, clock)
+        for i in range(1, 7):  # gentle from here on: calibration and hand guiding
+            await client.write(f"$ACC_AXIS[{i}]", f"{accel_percent:g}")
+        terms, info = await calibrate(client, reader, dyn, clock, identify_joints=identify_joints)
+        est = ForceEstimator(dyn, terms, tool=tool)
+        rest = RestAverage(est)
+        r0 = await reader.read()
+        x0 = np.asarray(forward(MODEL, r0.q, tool=tool), float)[:3]
+        wall_now = wall
+        await apply(_environment(wall_now, x0) + payload)
+        device, hand_at = HapticDevice(), hand or operator_script(duration)
+        clock_run = Clock(time_scale)
+        rendered, last_inc, moving = np.zeros(3), np.zeros(3), False
+        t_prev = 0.0
+        while (t := clock_run.now()) < duration:
+            r = await reader.read()
+            f_true = true_force()
+            x = np.asarray(forward(MODEL, r.q, tool=tool), float)[:3]
+            f_rest = rest.update(r.q, r.qd, r.tau, r.tau_text, commanding=moving)
+            fresh = None
+            if r.motion is not None:
+                fresh = est.estimate(r.motion, r.tau)
+            if rest.settled and f_rest is not None:
+                rendered = f_rest
+            elif fresh is not None:  # a light low-pass (~2 readings) for the hand, not the score
+                rendered = rendered + 0.5 * (fresh - rendered)
+            p = device.step(hand_at(t), -gain * rendered, max(t - t_prev, 0.0))
+            t_prev = t
+            inc = _increment(p, k_inc, dead_zone_mm)
+            if np.any(inc != last_inc):
+                await client.write("MYPOS", _mypos(inc))
+                last_inc = inc
+            moving = bool(np.any(inc != 0))
+            new = _environment(wall_now, x) + payload
+            if environment is not None and np.max(np.abs(new - applied)) > 0.01:
+                await apply(new)
+            rows.append(
+                _row(t, x - x0, r, fresh, f_rest if rest.settled else None, f_true, p, moving)
+            )
+            await clock_run.sleep(period - (clock_run.now() - t))
+    finally:
+        await client.write("MYPOS", _mypos((0, 0, 0)))
+        if environment is not None:
+            await apply(np.zeros(6))
+        for i, v in enumerate(str(old_acc).split()[:6], 1):
+            await client.write(f"$ACC_AXIS[{i}]", v)
+    info["consistent_frac"] = reader.consistent_fraction
+    info["steady_frac"] = reader.steady_fraction
+    info["implausible"] = float(reader.implausible)
+    scored = truth is not None or environment is not None
+    return report(rows, info, scored=scored, out_dir=out_dir, plots=plots)
 
 
-def _report(
-    rows: list[dict[str, float]], scored: bool, out_dir: str | Path | None, plots: bool
-) -> CaseResult:
-    result = CaseResult("haptic force feedback")
-    if len(rows) < 5:
-        raise RuntimeError(f"only {len(rows)} haptic cycles ran")
-    col = {k: np.array([r[k] for r in rows]) for k in rows[0]}
-    q = np.stack([col[f"q_A{i}"] for i in range(1, 7)], axis=1)
-    est = np.stack([col[f"F_est_{a}"] for a in "xyz"], axis=1)
-    true = np.stack([col[f"F_true_{a}"] for a in "xyz"], axis=1)
-    # settled: same axes before, at and after this sample, same truth as the sample before
-    # (two samples back: the tick that stops the axes publishes the same q with the last
-    # deceleration still in its I·q̈ term)
-    same = np.zeros(len(q), bool)
-    still = np.abs(np.diff(q, axis=0)).max(1) < 1e-6  # still[i]: q[i] == q[i + 1]
-    same[2:-1] = still[:-2] & still[1:-1] & still[2:]
-    same[2:] &= (np.abs(true[2:] - true[1:-1]).max(1) < 1e-9) & (
-        np.abs(true[1:-1] - true[:-2]).max(1) < 1e-9
-    )
-    err = np.linalg.norm(est - true, axis=1)
-    tol = np.maximum(0.05 * np.linalg.norm(true, axis=1), 0.5)
-    m = result.metrics
-    m["cycle_hz"] = float((len(rows) - 1) / (col["t"][-1] - col["t"][0]))
-    m["max_force_N"] = float(np.max(np.linalg.norm(true, axis=1)))
-    m["settled_samples"] = float(np.sum(same))
-    m["settled_force_max_N"] = (
-        float(np.linalg.norm(true[same], axis=1).max()) if same.any() else 0.0
-    )
-    nan = math.nan
-    m["force_err_settled_max_N"] = float(err[same].max()) if scored and same.any() else nan
-    m["force_err_settled_rms_N"] = (
-        float(np.sqrt(np.mean(err[same] ** 2))) if scored and same.any() else nan
-    )
-    m["within_tol_settled_frac"] = float(np.mean(err[same] <= tol[same])) if same.any() else nan
-    moving = ~same
-    m["force_err_moving_rms_N"] = (
-        float(np.sqrt(np.mean(err[moving] ** 2))) if scored and moving.any() else nan
-    )
-    m["force_err_moving_p95_N"] = (
-        float(np.percentile(err[moving], 95)) if scored and moving.any() else nan
-    )
-    result.thesis["within_tol_settled_frac"] = "figure only (no error reported)"
-    if out_dir is None:
-        return result
-    folder = output_dir(out_dir, "haptic")
-    result.add_file(write_csv(folder / "haptic.csv", rows))
-    if plots:
-        t = col["t"]
-        fig, axes = new_figure(2, 2, figsize=(11, 8), sharex=True)  # Figure 4.19 a-d
-        panels = [
-            ("(a) TCP position (mm)", [(f"x_{a}", a.upper()) for a in "xyz"]),
-            ("(b) joint angles (deg)", [(f"q_A{i}", f"A{i}") for i in range(1, 7)]),
-            ("(c) joint torques (Nm)", [(f"tau_A{i}", f"A{i}") for i in range(1, 7)]),
-            ("(d) TCP force (N): estimate, -- true", [(f"F_est_{a}", f"F{a}") for a in "xyz"]),
-        ]
-        for ax, (title, series) in zip(np.ravel(axes), panels, strict=True):
-            for key, label in series:
-                ax.plot(t, col[key], label=label)
-            ax.set_title(title)
-            ax.grid(True, alpha=0.3)
-            ax.legend(fontsize=7)
-        for a in "xyz":
-            np.ravel(axes)[3].plot(t, col[f"F_true_{a}"], "--", color="grey", linewidth=0.8)
-        for ax in np.ravel(axes)[2:]:
-            ax.set_xlabel("time (s)")
-        result.add_file(save_figure(fig, folder / "fig4_19_haptic.png"))
-    return result
+def _environment(wall: Wall | None, x: FloatArray) -> FloatArray:
+    return wall.wrench(x) if wall is not None else np.zeros(6)
+
+
+def _increment(p: FloatArray, k_inc: float, dead_zone: float) -> FloatArray:
+    """The MYPOS increment for handle offset ``p``: the direction of motion beyond the dead
+    zone, at 0.1 mm resolution, so "no input" is an exact zero (and the robot really stops)."""
+    norm = float(np.linalg.norm(p))
+    if norm <= dead_zone:
+        return np.zeros(3)
+    return np.asarray(np.round(k_inc * p * (1.0 - dead_zone / norm), 1), float)
+
+
+def _row(
+    t: float,
+    dx: FloatArray,
+    r: Reading,
+    fresh: FloatArray | None,
+    settled: FloatArray | None,
+    f_true: FloatArray,
+    handle: FloatArray,
+    moving: bool,
+) -> dict[str, float]:
+    nan3 = np.full(3, math.nan)
+    row = {"t": t, "moving": float(moving), "consistent": float(r.consistent)}
+    row.update({f"dx_{a}": v for a, v in zip("xyz", dx, strict=True)})
+    row.update({f"q_A{i + 1}": v for i, v in enumerate(r.q)})
+    row.update({f"tau_A{i + 1}": v for i, v in enumerate(r.tau)})
+    for key, value in (
+        ("F_est", nan3 if fresh is None else fresh),
+        ("F_settled", nan3 if settled is None else settled),
+        ("F_true", f_true),
+        ("handle", handle),
+    ):
+        row.update({f"{key}_{a}": float(v) for a, v in zip("xyz", value, strict=True)})
+    return row

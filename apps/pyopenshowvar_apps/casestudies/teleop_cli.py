@@ -43,7 +43,7 @@ def _run(program: str, sim: bool, job: Any) -> Any:
 
     async def main() -> Any:
         async with Client(host, port, timeout=Opts.timeout) as kvp:
-            return await job(kvp)
+            return await job(kvp, thread)
 
     try:
         result = asyncio.run(main())
@@ -109,7 +109,7 @@ def teleop(
     _run(
         program,
         sim,
-        lambda kvp: run_teleoperation(
+        lambda kvp, emu: run_teleoperation(
             kvp,
             hand,
             mode=mode,  # type: ignore[arg-type]
@@ -129,8 +129,19 @@ def haptic(
     """Case study 4: haptic force feedback through MYPOS / ACTUATOR and $TORQUE_AXIS_ACT."""
     from pyopenshowvar_apps.casestudies.haptic import run_haptic
 
-    _run(
-        "actuator",
-        sim,
-        lambda kvp: run_haptic(kvp, duration=duration, payload_kg=payload, out_dir=out),
-    )
+    def job(kvp: Any, emu: Any) -> Any:
+        # with --emulate the payload is applied as EMU_WRENCH and the true force is the
+        # plant's (contact + EMU_WRENCH); a real robot has neither: the errors are not scored
+        plant = emu.emulator.robot.plant if emu is not None else None
+        truth = None if plant is None else lambda: plant.truth.contact[:3] + plant.truth.wrench[:3]
+        environment = "kvp" if emu is not None else None
+        return run_haptic(
+            kvp,
+            duration=duration,
+            payload_kg=payload,
+            out_dir=out,
+            truth=truth,
+            environment=environment,  # type: ignore[arg-type]
+        )
+
+    _run("actuator", sim, job)
