@@ -235,6 +235,7 @@ async def run_line_following(
     truth: Callable[[], npt.ArrayLike] | None = None,
     out_dir: str | Path | None = None,
     model: RobotModel = KR6R900SIXX,
+    plots: bool = True,
 ) -> CaseResult:
     """Detect the line in ``image_path``, make the robot follow it, measure how well.
 
@@ -246,7 +247,7 @@ async def run_line_following(
     the drawn line, what the errors are measured against (else the detected path). ``truth``
     returns the physical TCP position (mm, $BASE) now: the executed path is measured from it
     instead of ``$POS_ACT``. Points are limited to 512 (MYPOSARRAY): the resolution is
-    coarsened if needed.
+    coarsened if needed. ``plots`` False writes the CSVs only.
     """
     out = output_dir(out_dir, None)
     det = detect_path(image_path, start, end)
@@ -275,7 +276,7 @@ async def run_line_following(
             timeout=10 + 3 * expected,
             poll=poll_s,
             truth=truth,
-            truth_period=0.004 / time_scale,
+            truth_period=max(0.004 / time_scale, 0.002),
         )
     finally:
         for name, r in old.items():
@@ -312,9 +313,9 @@ async def run_line_following(
         samples=float(on.sum()),
     )
     result = CaseResult("line following", metrics, dict(THESIS))
-    _write_outputs(
-        result, out, det, table, detected, reference, xyz, t, measured, on, err_xy, err_z
-    )
+    _write_outputs(result, out, det, detected, reference, xyz, t, measured, on, err_xy, err_z)
+    if plots:
+        _figures(result, out, det, detected, reference, t, measured, on, err_xy, err_z)
     return result
 
 
@@ -331,7 +332,6 @@ def _write_outputs(
     result: CaseResult,
     out: Path,
     det: Detection,
-    table: Table,
     detected: np.ndarray,
     reference: np.ndarray,
     xyz: np.ndarray,
@@ -341,7 +341,7 @@ def _write_outputs(
     err_xy: np.ndarray,
     err_z: np.ndarray,
 ) -> None:
-    """CSV of the samples and of the path, and the three Figure-4.15-like plots."""
+    """CSV of the samples and of the path."""
     rows: list[list[Any]] = [
         [f"{ti:.4f}", f"{p[0]:.3f}", f"{p[1]:.3f}", f"{p[2]:.3f}", int(o), f"{e:.4f}", f"{ez:.4f}"]
         for ti, p, o, e, ez in zip(t, pts, on, err_xy, err_z, strict=True)
@@ -361,6 +361,20 @@ def _write_outputs(
         )
     )
 
+
+def _figures(
+    result: CaseResult,
+    out: Path,
+    det: Detection,
+    detected: np.ndarray,
+    reference: np.ndarray,
+    t: np.ndarray,
+    pts: np.ndarray,
+    on: np.ndarray,
+    err_xy: np.ndarray,
+    err_z: np.ndarray,
+) -> None:
+    """The three Figure-4.15-like plots."""
     fig, ax = new_figure()
     ax.imshow(det.gray, cmap="gray", vmin=0, vmax=1)
     ax.contour(det.mask, levels=[0.5], colors="tab:blue", linewidths=0.6)

@@ -147,7 +147,10 @@ def trace(
     d = distance_map(mask) if dist is None else dist
     dmax = max(float(d.max()), 1.0)
     costs = np.where(mask, 1.0 + centre_weight * (1.0 - np.minimum(d, dmax) / dmax), np.inf)
-    path, cost = route_through_array(costs, start, goal, fully_connected=True, geometric=True)
+    try:
+        path, cost = route_through_array(costs, start, goal, fully_connected=True, geometric=True)
+    except ValueError:  # skimage: "no minimum-cost path was found"
+        cost = math.inf
     if not math.isfinite(cost):
         raise NoPathError(f"no traversable path from {start} to {goal} inside the line region")
     return [(int(r), int(c)) for r, c in path]
@@ -159,8 +162,9 @@ def centreline(pixels: list[Pixel], dist: FloatArray, *, trim: bool = True) -> F
     (the median distance-to-background along the path: the marker radius), so it ends where the
     stroke's centre ended rather than at the tip of its round cap."""
     xy = np.array([(c, r) for r, c in pixels], dtype=np.float64)
-    radius = float(np.median([dist[p] for p in pixels]))
-    window = max(3, round(2 * radius) | 1)
+    # the EDT counts to the centre of the first background pixel: the edge is half a pixel in
+    radius = float(np.median([dist[p] for p in pixels])) - 0.5
+    window = max(3, round(2 * radius + 1) | 1)
     if len(xy) > window:
         # odd (point) reflection about each end keeps the ends and straight runs in place
         pad = window // 2
