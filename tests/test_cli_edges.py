@@ -275,7 +275,7 @@ def test_the_case_studies_emulate_the_program_they_need(capsys: Any) -> None:
 
     seen: list[str] = []
 
-    async def probe(kvp: Any) -> CaseResult:
+    async def probe(kvp: Any, emu: Any) -> CaseResult:
         seen.append(await kvp.read("$PRO_NAME1[]"))
         return CaseResult("probe")
 

@@ -62,9 +62,15 @@ def test_wall_spring_and_device() -> None:
         p = dev.step([50, 0, 0], [-4.0, 0, 0], 0.01)
     np.testing.assert_allclose(p, [30, 0, 0], atol=0.05)  # 0.2 N/mm·(50 − 30) = 4 N
     # inside the dead zone, or too little beyond it for 0.1 mm: exactly no motion
-    assert not np.any(_increment(np.array([4.0, 3.0, 0]), 0.02, 5.0))
-    assert not np.any(_increment(np.array([7.0, 0, 0]), 0.02, 5.0))
-    np.testing.assert_array_equal(_increment(np.array([0, 0, -30.0]), 0.02, 5.0), [0, 0, -0.5])
+    assert not np.any(_increment(np.array([4.0, 3.0, 0]), 0.02, 5.0, moving=True))
+    assert not np.any(_increment(np.array([7.0, 0, 0]), 0.02, 5.0, moving=True))
+    np.testing.assert_array_equal(
+        _increment(np.array([0, 0, -30.0]), 0.02, 5.0, True), [0, 0, -0.5]
+    )
+    # a standing robot needs 6 mm more to start: noise at the dead zone's edge does not start it
+    assert np.any(_increment(np.array([9.0, 0, 0]), 0.02, 5.0, moving=True))
+    assert not np.any(_increment(np.array([9.0, 0, 0]), 0.02, 5.0, moving=False))
+    assert np.any(_increment(np.array([12.0, 0, 0]), 0.02, 5.0, moving=False))
 
 
 @pytest.mark.parametrize("load", [None, Load(2.5, (10.0, -20.0, 60.0))])

@@ -113,7 +113,7 @@ class HapticDevice:
 def operator_script(duration: float) -> Callable[[float], FloatArray]:
     """Where the operator's hand pulls the handle (mm): like Figure 4.19, lift up first, then
     sideways and down, then forward — into whatever is in front — hold, and let go."""
-    keys = np.array([0.0, 0.08, 0.22, 0.3, 0.42, 0.5, 0.8, 0.86, 1.0]) * duration
+    keys = np.array([0.0, 0.06, 0.16, 0.22, 0.3, 0.36, 0.86, 0.9, 1.0]) * duration
     pts = np.array(
         [[0, 0, 0], [0, 0, 40], [0, 0, 40], [0, 30, -15], [0, 30, -15], [50, 0, 0], [50, 0, 0],
          [0, 0, 0], [0, 0, 0]], dtype=float,
@@ -306,13 +306,13 @@ async def run_haptic(
             fresh = None
             if r.motion is not None:
                 fresh = est.estimate(r.motion, r.tau)
-            if rest.settled and f_rest is not None:
+            if f_rest is not None:  # standing: the running mean since it stopped
                 rendered = f_rest
             elif fresh is not None:  # a light low-pass (~2 readings) for the hand, not the score
                 rendered = rendered + 0.5 * (fresh - rendered)
             p = device.step(hand_at(t), -gain * rendered, max(t - t_prev, 0.0))
             t_prev = t
-            inc = _increment(p, k_inc, dead_zone_mm)
+            inc = _increment(p, k_inc, dead_zone_mm, moving)
             if np.any(inc != last_inc):
                 await client.write("MYPOS", _mypos(inc))
                 last_inc = inc
@@ -341,11 +341,18 @@ def _environment(wall: Wall | None, x: FloatArray) -> FloatArray:
     return wall.wrench(x) if wall is not None else np.zeros(6)
 
 
-def _increment(p: FloatArray, k_inc: float, dead_zone: float) -> FloatArray:
+#: How much farther than the dead zone the handle must go to start a robot that stands (mm):
+#: in contact the handle rests where the rendered force balances the hand, at the edge of the
+#: dead zone, and ~1 N of estimate noise would otherwise start and stop the robot for ever.
+RESTART_MM = 6.0
+
+
+def _increment(p: FloatArray, k_inc: float, dead_zone: float, moving: bool) -> FloatArray:
     """The MYPOS increment for handle offset ``p``: the direction of motion beyond the dead
-    zone, at 0.1 mm resolution, so "no input" is an exact zero (and the robot really stops)."""
+    zone (:data:`RESTART_MM` farther to start a standing robot), at 0.1 mm resolution, so "no
+    input" is an exact zero (and the robot really stops)."""
     norm = float(np.linalg.norm(p))
-    if norm <= dead_zone:
+    if norm <= (dead_zone if moving else dead_zone + RESTART_MM):
         return np.zeros(3)
     return np.asarray(np.round(k_inc * p * (1.0 - dead_zone / norm), 1), float)
 

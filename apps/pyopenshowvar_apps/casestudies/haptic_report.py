@@ -98,7 +98,7 @@ def _figure(
     fig, axes = new_figure(2, 2, figsize=(12, 8), sharex=True)
     a, b, c, d = np.ravel(axes)
     for k in "xyz":  # (a) relative to the start, so the axis spans the motion, not the reach
-        a.plot(t, col[f"dx_{k}"], label=f"{k.upper()} − X₀" if k == "x" else f"{k.upper()}")
+        a.plot(t, col[f"dx_{k}"], label=k.upper())
     a.set_ylabel("TCP displacement from the start (mm)")
     a.set_title("(a) TCP motion")
     for i in range(1, 7):

@@ -109,6 +109,7 @@ def linefollow(
     pose = tuple(float(v) for v in table.split(","))
     host, port, scale_t = Opts.host, Opts.port, 1.0
     emu: Any = None
+    tcp = None  # the physical TCP of the emulated robot: the executed path is measured from it
     if Opts.emulate:  # kvp [--emulate] linefollow [--emulate]: an emulator running cart_path
         from kukavarproxy_emu import EmulatorConfig, EmulatorThread
         from pyopenshowvar_apps.casestudies.linefollow_vision import load_gray
@@ -118,6 +119,11 @@ def linefollow(
         config = EmulatorConfig(port=0, program="cart_path", speed=speed, latency="kvp")
         emu = EmulatorThread(config, store=store).start()
         host, port, scale_t = "127.0.0.1", emu.port, speed
+        plant = emu.emulator.robot.plant if emu.emulator.robot is not None else None
+        if plant is not None:
+
+            def tcp() -> Any:
+                return plant.truth.tcp[:3, 3]
 
     async def job() -> Any:
         async with Client(host, port, timeout=Opts.timeout) as client:
@@ -133,6 +139,7 @@ def linefollow(
                 cdis_mm=cdis,
                 time_scale=scale_t,
                 ground_truth=truth,
+                truth=tcp,
                 out_dir=folder,
             )
 
