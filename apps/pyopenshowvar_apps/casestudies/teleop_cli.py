@@ -23,7 +23,7 @@ __all__ = ["haptic", "teleop"]
 SimFlag = Annotated[bool, typer.Option("--sim", hidden=True, help="Deprecated: use --emulate.")]
 
 
-def _run(program: str, sim: bool, job: Any) -> Any:
+def _run(program: str, sim: bool, job: Any, obstacles: tuple[Any, ...] = ()) -> Any:
     from rich.console import Console
 
     from pyopenshowvar import Client, KvpError
@@ -37,7 +37,8 @@ def _run(program: str, sim: bool, job: Any) -> Any:
     if sim or Opts.emulate:
         from kukavarproxy_emu import EmulatorConfig, EmulatorThread
 
-        thread = EmulatorThread(EmulatorConfig(port=0, program=program, latency="kvp"))
+        config = EmulatorConfig(port=0, program=program, latency="kvp", obstacles=obstacles)
+        thread = EmulatorThread(config)
         thread.start()
         host, port = "127.0.0.1", thread.port
 
@@ -126,7 +127,8 @@ def haptic(
     out: Annotated[Path, typer.Option(help="Output folder.")] = Path("out"),
     sim: SimFlag = False,
 ) -> None:
-    """Case study 4: haptic force feedback through MYPOS / ACTUATOR and $TORQUE_AXIS_ACT."""
+    """Case study 4: haptic force feedback through MYPOS / ACTUATOR and $TORQUE_AXIS_ACT
+    (with --emulate the robot pushes into a foam block 30 mm ahead)."""
     from pyopenshowvar_apps.casestudies.haptic import run_haptic
 
     def job(kvp: Any, emu: Any) -> Any:
@@ -144,4 +146,10 @@ def haptic(
             environment=environment,  # type: ignore[arg-type]
         )
 
-    _run("actuator", sim, job)
+    from kukavarproxy_emu import Obstacle
+    from pyopenshowvar.kinematics import KR6R900SIXX, forward
+
+    # with --emulate, something to touch: a foam block 30 mm in front of HOME's TCP
+    x, y, z = forward(KR6R900SIXX, KR6R900SIXX.home)[:3]
+    block = Obstacle((x + 130.0, y, z), (100.0, 300.0, 300.0), stiffness=2.0)
+    _run("actuator", sim, job, obstacles=(block,))
