@@ -180,7 +180,9 @@ async def calibrate(
     the speeds of the haptic run. ``identify_joints`` False: tare only."""
     await client.write("MYPOS", _mypos((0, 0, 0)))
     await _wait_still(reader, clock)
-    q, tau, seen = [], [], set()
+    q: list[FloatArray] = []
+    tau: list[FloatArray] = []
+    seen: set[str] = set()
     deadline = clock.now() + rest_cycles * 0.05
     while len(tau) < rest_cycles and clock.now() < deadline:
         r = await reader.read()
@@ -253,7 +255,7 @@ async def run_haptic(
     clock = Clock(time_scale)
     load = Load.from_krl(await client.read_value("$LOAD"))
     tool_value = await client.read_value("$TOOL")
-    tool = frame_to_matrix(*(float(tool_value[k]) for k in "XYZABC"))  # type: ignore[index]
+    tool = frame_to_matrix(*(float(tool_value[k]) for k in "XYZABC"))
     dyn = NominalDynamics(MODEL, load)
     limit = MODEL.max_accel * accel_percent / 100.0
     reader = CycleReader(client, clock, model=MODEL, accel_limit=limit)

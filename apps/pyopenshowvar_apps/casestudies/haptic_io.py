@@ -116,7 +116,7 @@ class CycleReader:
     def _speed(self, t: float, text: str) -> FloatArray:
         if self._speeds and self._speeds[-1][1] == text:
             return self._speeds[-1][2]
-        qd = _reals(text, SPEED) * self.max_speed / 100.0  # % of the axis maximum → deg/s
+        qd: FloatArray = _reals(text, SPEED) * self.max_speed / 100.0  # % of maximum → deg/s
         self._speeds.append((t, text, qd))
         return qd
 

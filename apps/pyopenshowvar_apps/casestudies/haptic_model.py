@@ -155,11 +155,13 @@ def tare(
     dyn: NominalDynamics, q: Sequence[npt.ArrayLike], tau: Sequence[npt.ArrayLike]
 ) -> tuple[FloatArray, FloatArray]:
     """Offset (mean of τ − gravity) and noise (its standard deviation) of torques measured at
-    rest with nothing touching the robot. Needs a few cycles; each cycle counted once."""
-    if len(tau) < 3:
-        raise ValueError("taring needs at least 3 readings at rest")
+    rest with nothing touching the robot, each cycle counted once. A controller without
+    torque noise repeats one reading: its noise is taken as 1 µNm."""
+    if not tau:
+        raise ValueError("taring needs readings at rest")
     resid = np.array([np.asarray(t, float) - dyn.gravity(qq) for qq, t in zip(q, tau, strict=True)])
-    return resid.mean(axis=0), np.maximum(resid.std(axis=0, ddof=1), 1e-6)
+    spread = resid.std(axis=0, ddof=1) if len(resid) > 1 else np.zeros(6)
+    return resid.mean(axis=0), np.maximum(spread, 1e-6)
 
 
 def identify(

@@ -313,7 +313,7 @@ async def run_line_following(
         samples=float(on.sum()),
     )
     result = CaseResult("line following", metrics, dict(THESIS))
-    _write_outputs(result, out, det, detected, reference, xyz, t, measured, on, err_xy, err_z)
+    _write_outputs(result, out, xyz, t, measured, on, err_xy, err_z)
     if plots:
         _figures(result, out, det, detected, reference, t, measured, on, err_xy, err_z)
     return result
@@ -331,9 +331,6 @@ def _on_line_mask(pts: np.ndarray, xyz: np.ndarray) -> np.ndarray:
 def _write_outputs(
     result: CaseResult,
     out: Path,
-    det: Detection,
-    detected: np.ndarray,
-    reference: np.ndarray,
     xyz: np.ndarray,
     t: np.ndarray,
     pts: np.ndarray,
