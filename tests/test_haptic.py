@@ -154,17 +154,26 @@ def test_estimator_on_the_dynamic_plant_meets_the_targets() -> None:
     est, tare_only = ForceEstimator(dyn, terms), ForceEstimator(dyn, base)
     averager = RestAverage(est)
     moving, moving_tare, settled, peak = [], [], [], 0.0
-    script = [((0, 0, 0.6), 40), ((0.8, 0, 0), 190), ((0, 0, 0), 130), ((-0.8, 0, 0), 60)]
-    for inc, n in script:  # up, forward into the block (~50 N), hold, back off
+
+    def cycle(inc: tuple[float, float, float]) -> float:
+        motion, tau, text, truth = sim.step(inc)
+        f_rest = averager.update(motion.q, motion.qd_end, tau, text, commanding=any(inc))
+        if averager.settled and f_rest is not None:
+            settled.append(np.linalg.norm(f_rest - truth))
+        elif not sim.robot.plant.resting:
+            moving.append(np.linalg.norm(est.estimate(motion, tau) - truth))
+            moving_tare.append(np.linalg.norm(tare_only.estimate(motion, tau) - truth))
+        return float(np.linalg.norm(truth))
+
+    for _ in range(40):  # up a little
+        cycle((0, 0, 0.6))
+    for _ in range(400):  # forward into the block until it pushes back with ~35 N
+        peak = max(peak, cycle((0.8, 0, 0)))
+        if peak > 35.0:
+            break
+    for inc, n in (((0, 0, 0), 130), ((-0.8, 0, 0), 60)):  # hold, back off
         for _ in range(n):
-            motion, tau, text, truth = sim.step(inc)
-            peak = max(peak, float(np.linalg.norm(truth)))
-            f_rest = averager.update(motion.q, motion.qd_end, tau, text, commanding=any(inc))
-            if averager.settled and f_rest is not None:
-                settled.append(np.linalg.norm(f_rest - truth))
-            elif not sim.robot.plant.resting:
-                moving.append(np.linalg.norm(est.estimate(motion, tau) - truth))
-                moving_tare.append(np.linalg.norm(tare_only.estimate(motion, tau) - truth))
+            peak = max(peak, cycle(inc))
     assert peak > 30.0  # the arm really pushed into the block
     assert len(settled) > 30 and len(moving) > 150
     rms = math.sqrt(np.mean(np.square(moving)))
@@ -179,9 +188,9 @@ def test_estimator_on_the_dynamic_plant_meets_the_targets() -> None:
 async def test_a_consistent_group_is_one_cycle(emulator_factory) -> None:
     """Four pipelined reads with the kvp latency span ~7 ms: the groups the reader calls
     consistent hold the torque of the very cycle whose speeds they hold (checked against the
-    plant's own record of every cycle). The robot runs at half speed (24 ms cycles) so that a
+    plant's own record of every cycle). The robot runs at quarter speed (48 ms cycles) so that a
     busy machine still yields consistent groups while it moves."""
-    emu = await emulator_factory(program="actuator", latency="kvp", seed=3, speed=0.5)
+    emu = await emulator_factory(program="actuator", latency="kvp", seed=3, speed=0.25)
     plant = emu.robot.plant
     record: dict[bytes, np.ndarray] = {}  # end-of-cycle speeds (% as published) → torque
     step = plant.step
@@ -194,12 +203,12 @@ async def test_a_consistent_group_is_one_cycle(emulator_factory) -> None:
     plant.step = recording  # type: ignore[method-assign]
     readings = []
     async with Client("127.0.0.1", emu.port, timeout=2.0) as kvp:
-        clock = Clock(0.5)
+        clock = Clock(0.25)
         reader = CycleReader(kvp, clock)
-        for k in range(4):  # up and down, 0.3 s each (robot time)
+        for k in range(4):  # up and down, 0.2 s each (robot time)
             z = 0.8 if k % 2 == 0 else -0.8
             await kvp.write("MYPOS", f"{{X 0.0, Y 0.0, Z {z}, A 0.0, B 0.0, C 0.0}}")
-            end = clock.now() + 0.3
+            end = clock.now() + 0.2
             while clock.now() < end:
                 readings.append(await reader.read())
         await kvp.write("MYPOS", "{X 0.0, Y 0.0, Z 0.0, A 0.0, B 0.0, C 0.0}")
@@ -214,7 +223,7 @@ async def test_a_consistent_group_is_one_cycle(emulator_factory) -> None:
         if not r.consistent:
             assert not np.array_equal(r.qd, r.qd_after)
     assert not bad, bad
-    assert checked >= 3, (checked, len(readings), reader.consistent_fraction)
+    assert checked >= 2, (checked, len(readings), reader.consistent_fraction)
 
 
 def _push(t: float) -> np.ndarray:

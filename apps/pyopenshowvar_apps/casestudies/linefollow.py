@@ -39,13 +39,8 @@ from pyopenshowvar import Client
 from pyopenshowvar.kinematics import KR6R900SIXX, RobotModel, UnreachableError, inverse
 from pyopenshowvar.krl import E6Pos
 from pyopenshowvar_apps.casestudies import linefollow_vision as vision
-from pyopenshowvar_apps.casestudies.common import (
-    CaseResult,
-    new_figure,
-    output_dir,
-    save_figure,
-    write_csv,
-)
+from pyopenshowvar_apps.casestudies.common import CaseResult, output_dir
+from pyopenshowvar_apps.casestudies.linefollow_report import figures, write_outputs
 
 __all__ = [
     "DEFAULT_TABLE_POSE",
@@ -196,7 +191,8 @@ async def _execute(
             t = time.monotonic() - t0
             pos = res["$POS_ACT"].unwrap()
             if isinstance(pos, E6Pos):
-                samples.append((t, float(pos.x), float(pos.y), float(pos.z)))
+                x, y, z = (float(v) for v in pos.to_numpy()[:3])
+                samples.append((t, x, y, z))
             if res["$STOPMESS"].ok and res["$STOPMESS"].value is True:
                 msg = await client.read_many(["$EMU_MESSAGE[]"])
                 text = msg["$EMU_MESSAGE[]"].text or "(no message)"
@@ -313,9 +309,9 @@ async def run_line_following(
         samples=float(on.sum()),
     )
     result = CaseResult("line following", metrics, dict(THESIS))
-    _write_outputs(result, out, xyz, t, measured, on, err_xy, err_z)
+    write_outputs(result, out, xyz, t, measured, on, err_xy, err_z)
     if plots:
-        _figures(result, out, det, detected, reference, t, measured, on, err_xy, err_z)
+        figures(result, out, det, detected, reference, t, measured, on, err_xy, err_z)
     return result
 
 
@@ -326,93 +322,3 @@ def _on_line_mask(pts: np.ndarray, xyz: np.ndarray) -> np.ndarray:
     d_out = vision.polyline_distance(pts, xyz[-2:])
     mask: np.ndarray = (d_line <= d_in) & (d_line <= d_out) & (pts[:, 2] < xyz[1, 2] + 1.0)
     return mask
-
-
-def _write_outputs(
-    result: CaseResult,
-    out: Path,
-    xyz: np.ndarray,
-    t: np.ndarray,
-    pts: np.ndarray,
-    on: np.ndarray,
-    err_xy: np.ndarray,
-    err_z: np.ndarray,
-) -> None:
-    """CSV of the samples and of the path."""
-    rows: list[list[Any]] = [
-        [f"{ti:.4f}", f"{p[0]:.3f}", f"{p[1]:.3f}", f"{p[2]:.3f}", int(o), f"{e:.4f}", f"{ez:.4f}"]
-        for ti, p, o, e, ez in zip(t, pts, on, err_xy, err_z, strict=True)
-    ]
-    result.add_file(
-        write_csv(
-            out / "linefollow_samples.csv",
-            rows,
-            ["t_s", "x_mm", "y_mm", "z_mm", "on_line", "error_xy_mm", "error_z_mm"],
-        )
-    )
-    result.add_file(
-        write_csv(
-            out / "linefollow_path.csv",
-            [[i, *(f"{v:.3f}" for v in p)] for i, p in enumerate(xyz, 1)],
-            ["row", "x_mm", "y_mm", "z_mm"],
-        )
-    )
-
-
-def _figures(
-    result: CaseResult,
-    out: Path,
-    det: Detection,
-    detected: np.ndarray,
-    reference: np.ndarray,
-    t: np.ndarray,
-    pts: np.ndarray,
-    on: np.ndarray,
-    err_xy: np.ndarray,
-    err_z: np.ndarray,
-) -> None:
-    """The three Figure-4.15-like plots."""
-    fig, ax = new_figure()
-    ax.imshow(det.gray, cmap="gray", vmin=0, vmax=1)
-    ax.contour(det.mask, levels=[0.5], colors="tab:blue", linewidths=0.6)
-    ax.plot(
-        det.path_px[:, 0], det.path_px[:, 1], color="tab:red", lw=1.2, label="detected centreline"
-    )
-    ax.plot(*det.path_px[0], "go", label="start")
-    ax.plot(*det.path_px[-1], "rs", label="end")
-    ax.set_xlabel("image x (pixels)")
-    ax.set_ylabel("image y (pixels)")
-    ax.set_title("Detected line and its centreline (camera image)")
-    ax.legend(loc="lower right", fontsize=8)
-    result.add_file(save_figure(fig, out / "linefollow_detection.png"))
-
-    fig, ax = new_figure()
-    ax.plot(
-        reference[:, 1],
-        reference[:, 0],
-        color="black",
-        lw=3,
-        alpha=0.3,
-        label="true centreline" if reference is not detected else "detected",
-    )
-    if reference is not detected:
-        ax.plot(detected[:, 1], detected[:, 0], color="tab:blue", lw=1, ls="--", label="detected")
-    ax.plot(pts[on, 1], pts[on, 0], color="tab:red", lw=1, label="executed")
-    ax.set_xlabel("Y in $BASE (mm)")
-    ax.set_ylabel("X in $BASE (mm)")
-    ax.set_aspect("equal")
-    ax.invert_xaxis()  # seen from above with the robot at the bottom: +Y to the left
-    ax.set_title("True, detected and executed path (table, robot base)")
-    ax.legend(fontsize=8)
-    result.add_file(save_figure(fig, out / "linefollow_path.png"))
-
-    fig, ax = new_figure()
-    ax.plot(t[on] - t[on][0], err_xy[on], label="XY deviation")
-    ax.plot(t[on] - t[on][0], err_z[on], label="Z deviation")
-    ax.set_xlabel("time on the line (s)")
-    what = "true centreline" if reference is not detected else "detected path"
-    ax.set_ylabel(f"deviation from the {what} (mm)")
-    ax.set_title(f"Tracking error: max {err_xy[on].max():.3f} mm")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
-    result.add_file(save_figure(fig, out / "linefollow_error.png"))
