@@ -167,7 +167,7 @@ async def _execute(
     timeout: float,
     poll: float,
     truth: Callable[[], npt.ArrayLike] | None,
-    truth_period: float,
+    truth_period: float = 0.004,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Write the path, start it, and poll ``$POS_ACT`` until ``PATH_DONE``. Returns the
     reported samples (t, X, Y, Z) and, with ``truth``, the physical TCP sampled every
@@ -225,6 +225,7 @@ async def run_line_following(
     cdis_mm: float = 1.0,
     acc: float | None = 1.0,
     lift_mm: float = 10.0,
+    approach_speed: float = 0.2,
     time_scale: float = 1.0,
     poll_s: float = 0.0,
     ground_truth: np.ndarray | None = None,
@@ -243,7 +244,9 @@ async def run_line_following(
     the drawn line, what the errors are measured against (else the detected path). ``truth``
     returns the physical TCP position (mm, $BASE) now: the executed path is measured from it
     instead of ``$POS_ACT``. Points are limited to 512 (MYPOSARRAY): the resolution is
-    coarsened if needed. ``plots`` False writes the CSVs only.
+    coarsened if needed. The robot first goes to the point ``lift_mm`` above the line's start
+    at ``approach_speed`` (m/s), a path of its own, so the slow line speed is not spent on the
+    way there. ``plots`` False writes the CSVs only.
     """
     out = output_dir(out_dir, None)
     det = detect_path(image_path, start, end)
@@ -266,13 +269,16 @@ async def run_line_following(
     await client.write("$APO.CDIS", cdis_mm)
     expected = (length + 2 * lift_mm + 400.0) / (vel * 1000.0) / time_scale
     try:
+        await client.write("$VEL.CP", approach_speed)
+        await _execute(client, poses[:1], timeout=10 + 2.0 / approach_speed, poll=0.0, truth=None)
+        await client.write("$VEL.CP", round(vel, 6))
         reported, physical = await _execute(
             client,
             poses,
             timeout=10 + 3 * expected,
             poll=poll_s,
             truth=truth,
-            truth_period=max(0.004 / time_scale, 0.002),
+            truth_period=max(0.006 / time_scale, 0.002),
         )
     finally:
         for name, r in old.items():
