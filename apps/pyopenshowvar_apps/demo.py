@@ -102,7 +102,8 @@ def _line_following(out: Path, cond: Conditions) -> CaseResult:
             img.path or out / "line.png",
             out_dir=out,
             time_scale=cond.speed,
-            duration_s=4.0 if cond.quick else 10.0,
+            duration_s=3.0 if cond.quick else 10.0,
+            resolution_mm=4.0 if cond.quick else 2.0,
             ground_truth=img.centreline,
             truth=(lambda: plant.truth.tcp[:3, 3]) if plant is not None else None,
         )

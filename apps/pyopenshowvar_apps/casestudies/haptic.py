@@ -247,9 +247,8 @@ async def run_haptic(
     ``truth`` returns the true TCP force (N, base axes) for scoring; by default the wrench the
     app applied (None without an environment: a real robot, errors NaN). ``hand``: where the
     operator's hand pulls the handle at each time (mm), default :func:`operator_script`.
-    ``identify_joints``
-    False skips the friction/rotor identification (tare only), for comparison. ``tilt``: first
-    leave HOME's wrist singularity (:func:`leave_singularity`).
+    ``identify_joints`` False skips the friction/rotor identification (tare only), for
+    comparison. ``tilt``: first leave HOME's wrist singularity (:func:`leave_singularity`).
     ``period`` is the shortest loop period (robot s): about two readings per IPO cycle.
     """
     clock = Clock(time_scale)
@@ -294,8 +293,7 @@ async def run_haptic(
         rest = RestAverage(est)
         r0 = await reader.read()
         x0 = np.asarray(forward(MODEL, r0.q, tool=tool), float)[:3]
-        wall_now = wall
-        await apply(_environment(wall_now, x0) + payload)
+        await apply(_environment(wall, x0) + payload)
         device, hand_at = HapticDevice(), hand or operator_script(duration)
         clock_run = Clock(time_scale)
         rendered, last_inc, moving = np.zeros(3), np.zeros(3), False
@@ -319,7 +317,7 @@ async def run_haptic(
                 await client.write("MYPOS", _mypos(inc))
                 last_inc = inc
             moving = bool(np.any(inc != 0))
-            new = _environment(wall_now, x) + payload
+            new = _environment(wall, x) + payload
             if environment is not None and np.max(np.abs(new - applied)) > 0.01:
                 await apply(new)
             rows.append(
