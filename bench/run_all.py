@@ -27,6 +27,7 @@ DOC = ROOT / "docs" / "BENCHMARKS.md"
 BEGIN, END = "<!-- BEGIN GENERATED -->", "<!-- END GENERATED -->"
 SCRIPTS = [
     ("Client", "client_roundtrip.py"),
+    ("Snapshots", "snapshot.py"),
     ("Codec", "codec.py"),
     ("Emulator", "emu_throughput.py"),
     ("Kinematics", "kinematics.py"),

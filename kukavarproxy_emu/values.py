@@ -86,7 +86,11 @@ def normalise(value: KrlValue, spec: TypeSpec) -> KrlValue:
         return value  # typed structs keep canonical order themselves
     if cls is not None:
         return cls().merged(value)  # coerces and orders the members
-    return Struct(sdef.name, {m: value[m] for m in sdef.member_names if m in value})
+    names = sdef.member_names
+    members = value.members
+    if value.type_name == sdef.name and tuple(members) == names[: len(members)]:
+        return value  # already in its type and order (the names come from the declaration)
+    return Struct._new(sdef.name, {m: members[m] for m in names if m in members})
 
 
 def rebuild(
@@ -97,14 +101,19 @@ def rebuild(
     if not members:
         if isinstance(old, Struct) and isinstance(new, Struct):
             if spec.struct is not None and len(new) == len(spec.struct.members):
-                # complete and flat (nested partials must merge): nothing to keep from old
-                if not any(isinstance(v, Struct) for v in new.values()):
+                # complete and flat (nested partials must merge), or a complete value of this
+                # very type (a variable copied whole): nothing to keep from old
+                if new.type_name == spec.struct.name or not any(
+                    isinstance(v, Struct) for v in new.values()
+                ):
                     return normalise(new, spec)
             return normalise(old.merged(new), spec)
         return normalise(new, spec)
     base = old if isinstance(old, Struct) else Struct(spec.name, {})
     child = rebuild(base.get(members[0]), chain[1:], members[1:], new)
-    return normalise(base.merged({members[0]: child}), spec)
+    # the child is the merged member already: replace it (merging it again costs a copy of
+    # every nested structure, per assignment)
+    return normalise(base.replace(**{members[0]: child}), spec)
 
 
 def coerce(value: object, spec: TypeSpec, registry: TypeRegistry) -> KrlValue:

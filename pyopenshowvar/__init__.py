@@ -50,6 +50,7 @@ from .krl import (
     parse_value,
 )
 from .robot import PathHandshake
+from .snapshot import Snapshot, SnapshotLimits, SnapshotReading, SnapshotTornError
 from .stats import AccessStats, StatsSnapshot
 
 __version__ = "0.1.0"
@@ -73,6 +74,10 @@ __all__ = [
     "ProtocolError",
     "ReadFailedError",
     "ReadResult",
+    "Snapshot",
+    "SnapshotLimits",
+    "SnapshotReading",
+    "SnapshotTornError",
     "StatsSnapshot",
     "Struct",
     "UnknownVariableError",

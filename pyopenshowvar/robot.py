@@ -9,6 +9,8 @@ asyncio :class:`~pyopenshowvar.client.Client` and the blocking :class:`pyopensho
 * ``write_joint_path()`` / ``write_cartesian_path()`` — thesis Algorithms 4.7–4.10 plus a
   handshake so a KRL program knows how many points are valid and when to start
   (see ``docs/paths.md`` for the variables and the matching KRL program).
+* ``read_snapshot()`` — many variables copied by the controller's SPS in one pass, read in
+  ONE request (:mod:`pyopenshowvar.snapshot`).
 * ``set_output()`` — binary outputs through a global BOOL array the SPS copies to ``$OUT``
   (Algorithm 4.11), because ``$OUT`` itself is not writable over KVP.
 """
@@ -27,6 +29,7 @@ import numpy.typing as npt
 from .core import Call, Op, as_async_method, as_sync_method
 from .errors import KrlValueError, KvpTimeoutError, UnknownVariableError
 from .krl import E6Axis, E6Pos, KrlValue, Struct, parse_array, parse_value
+from .snapshot import read_snapshot
 
 __all__ = ["PathHandshake", "RobotHelpers", "SyncRobotHelpers"]
 
@@ -224,6 +227,7 @@ class RobotHelpers:
     set_output = as_async_method(set_output)
     set_outputs = as_async_method(set_outputs)
     read_output = as_async_method(read_output)
+    read_snapshot = as_async_method(read_snapshot)
 
 
 class SyncRobotHelpers:
@@ -238,6 +242,7 @@ class SyncRobotHelpers:
     set_output = as_sync_method(set_output)
     set_outputs = as_sync_method(set_outputs)
     read_output = as_sync_method(read_output)
+    read_snapshot = as_sync_method(read_snapshot)
 
 
 def _real(value: KrlValue) -> float:

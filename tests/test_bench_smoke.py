@@ -30,6 +30,7 @@ BENCH = Path(__file__).resolve().parents[1] / "bench"
         ("motion_kss.py", "A2 reversal"),
         ("web_jog.py", "jog stop latency after release"),
         ("c3.py", "upload-to-motion"),
+        ("snapshot.py", "20 variables: `read_snapshot`"),
     ],
 )
 def test_benchmark_runs_quick(script: str, expect: str) -> None:

@@ -409,6 +409,12 @@ def convert(
     elif kind is Kind.STRUCT and spec.struct is not None:
         if isinstance(value, Struct):
             sdef = spec.struct
+            if value.type_name == sdef.name:
+                # a value of this very type (read from a variable, or parsed typed): KRL
+                # converts nothing, and the store checks it anyway. Copying a structure (an
+                # SPS snapshot) stays cheap and keeps its type, so an unchanged copy is seen
+                # as unchanged.
+                return value
             members: dict[str, KrlValue] = {}
             for name, member in value.items():
                 mtype = sdef.member_type(name)
