@@ -220,3 +220,32 @@ def test_forward_pose_angles_in_range(q: list[float]) -> None:
 def test_flange_down_is_a_plus_180() -> None:
     # atan2(-0.0, -1) = -180: the pose the issue reported now reads A 180
     assert tuple(forward(M, (0, -90, 90, 0, 90, 0))[3:]) == (180.0, 0.0, 180.0)
+
+
+# --- the single-pose FK of the simulated robot's readings -------------------------------------
+_angle = st.floats(-190.0, 190.0, allow_nan=False) | st.sampled_from([0.0, -0.0, 180.0, -180.0])
+_frame = st.none() | st.tuples(
+    *(st.floats(-300.0, 300.0) for _ in range(3)), *(st.floats(-180.0, 180.0) for _ in range(3))
+)
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(_angle, min_size=6, max_size=6), _frame, _frame)
+def test_single_pose_fk_matches_the_batched_fk(
+    q: list[float], tool: tuple[float, ...] | None, base: tuple[float, ...] | None
+) -> None:
+    from pyopenshowvar.kinematics.single import SinglePoseFK
+
+    fk = SinglePoseFK(M)
+    tool_m = None if tool is None else frame_to_matrix(*tool)
+    base_m = None if base is None else frame_to_matrix(*base)
+    fk.set_frames(tool_m, base_m)
+    got = np.array(fk.frame(q))
+    want = forward(M, q, tool_m, base_m)
+    assert np.allclose(got[:3], want[:3], atol=1e-9)
+    # the same rotation (A and C swap meaning only at the B = ±90° singularity)
+    assert rotation_angle_deg(matrix_from_abc(*got[3:]), matrix_from_abc(*want[3:])) < 1e-7
+    assert all(-180.0 < v <= 180.0 for v in got[3:])
+    assert fk.status_turn(q) == status_turn(M, q)
+    fk.set_frames(None, None)
+    assert fk.frame([0, -90, 90, 0, 0, 0]) == (525.0, 0.0, 890.0, 0.0, 90.0, 0.0)

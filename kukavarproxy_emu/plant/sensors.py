@@ -15,7 +15,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from pyopenshowvar.kinematics import RobotModel, fk_matrix, matrix_to_frame, status_turn
+from pyopenshowvar.kinematics import RobotModel
+from pyopenshowvar.kinematics.single import SinglePoseFK
 from pyopenshowvar.krl import E6Axis, E6Pos
 
 from ..store import VariableStore
@@ -31,8 +32,9 @@ MOTION_VARIABLES = (
 )  # fmt: skip
 #: Cycles of sensor noise drawn at once.
 NOISE_BLOCK = 256
-_E6 = np.zeros(6)
 _ZEROS = [0.0] * 6  # E1..E6 of the per-axis arrays
+_AXIS_KEYS = E6Axis.MEMBERS
+_POS_KEYS = ("X", "Y", "Z", "A", "B", "C")
 
 
 class Sensors:
@@ -59,6 +61,9 @@ class Sensors:
         self._noise = np.zeros((NOISE_BLOCK, 12))
         self._base_seen: object = None
         self._base: FloatArray | None = None
+        # one pose per cycle: plain-float FK (numpy's per-call overhead is most of a 4x4 chain)
+        self._fk = SinglePoseFK(self.model)
+        self._fk_frames: tuple[object, object] = (None, None)
 
     def _read_frame(self, name: str) -> FloatArray:
         raise NotImplementedError  # provided by the plant
@@ -103,26 +108,36 @@ class Sensors:
         axis jittering around 0° by encoder noise does not flip a turn bit)."""
         key = self._q_set.tobytes()
         if key != self._st_key:
-            s, t = status_turn(self.model, np.degrees(self._q_set))
-            self._st_key, self._st = key, (int(s), int(t))
+            self._st_key, self._st = key, self._fk.status_turn(self._q_set_deg.tolist())
         return self._st
 
     def publish(self) -> None:
-        """Write this cycle's readings into the store (called by the store on the first read)."""
+        """Write this cycle's readings into the store (called by the store on the first read).
+
+        The values are built directly (floats in canonical member order) and swapped in as
+        trusted: a robot read every cycle pays this once per cycle, and the store formats
+        each variable's text only when it is read.
+        """
         q, qd, tau = self.measure()
-        store, model = self.store, self.model
-        axes = E6Axis.from_numpy(np.concatenate([q, _E6]))
+        store = self.store
+        qs = q.tolist()
+        axes = E6Axis._new("E6AXIS", dict(zip(_AXIS_KEYS, qs + _ZEROS, strict=True)))
         store.set_system("$AXIS_ACT", axes, trusted=True)
         store.set_system("$AXIS_ACT_MEAS", axes, trusted=True)
         s, t = self._status_turn()
-        xyzabc = matrix_to_frame(fk_matrix(model, q, self._tool, self._base_matrix()))
-        pos = E6Pos.from_numpy(np.concatenate([xyzabc, _E6]), s=int(s), t=int(t))
+        base = self._base_matrix()
+        if self._fk_frames[0] is not self._tool or self._fk_frames[1] is not base:
+            self._fk.set_frames(self._tool, base)
+            self._fk_frames = (self._tool, base)
+        pose: dict[str, float | int] = dict(zip(_POS_KEYS, self._fk.frame(qs), strict=True))
+        pose["S"], pose["T"] = s, t
+        pose.update(zip(E6Pos.EXTERNAL, _ZEROS, strict=True))
+        pos = E6Pos._new("E6POS", pose)  # type: ignore[arg-type]
         store.set_system("$POS_ACT", pos, trusted=True)
         store.set_system("$POS_ACT_MES", pos, trusted=True)
-        store.set_system(
-            "$VEL_AXIS_ACT", [float(v) for v in qd / model.max_speed * 100.0] + _ZEROS, trusted=True
-        )
-        store.set_system("$TORQUE_AXIS_ACT", [float(v) for v in tau] + _ZEROS, trusted=True)
+        speed = (qd / self.model.max_speed * 100.0).tolist()
+        store.set_system("$VEL_AXIS_ACT", speed + _ZEROS, trusted=True)
+        store.set_system("$TORQUE_AXIS_ACT", tau.tolist() + _ZEROS, trusted=True)
         v = np.zeros(6)
         mujoco.mj_objectVelocity(
             self._mj, self._data, mujoco.mjtObj.mjOBJ_SITE, self._tcp_site, v, 0

@@ -34,6 +34,7 @@ from .frames import (
 from .inverse import inverse, inverse_all
 from .jacobian import LENGTH_SCALE, dls_velocity_ik, jacobian, manipulability, scaled_jacobian
 from .model import KR6R900SIXX, RobotModel
+from .single import SinglePoseFK
 from .statics import GRAVITY, Load, gravity_torques, torques_to_wrench, wrench_to_torques
 
 __all__ = [
@@ -43,6 +44,7 @@ __all__ = [
     "LENGTH_SCALE",
     "Load",
     "RobotModel",
+    "SinglePoseFK",
     "UnreachableError",
     "abc_from_matrix",
     "as_transform",
