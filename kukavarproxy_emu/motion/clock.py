@@ -1,21 +1,31 @@
-"""The emulator's interpolation clock: one tick per IPO cycle against absolute deadlines.
+"""The emulator's interpolation clocks: one tick per IPO cycle against absolute deadlines.
 
 Simulated time advances exactly ``ipo`` seconds per tick. Wall time between ticks is
 ``ipo / speed``: ``speed = 1`` is real time, ``speed = 20`` runs every timing of the simulated
 robot twenty times faster, consistently (a 1 s move takes 50 ms of wall time and 1 s of
-simulated time). Tick ``n`` is due at ``start + n · ipo / speed`` on the loop's monotonic clock;
-scheduling against these absolute deadlines (not "sleep one period after the last tick") means
-the sleep overshoot of one tick does not delay the next ones, so jitter never accumulates.
+simulated time). Tick ``n`` is due at ``start + phase + n · ipo / speed`` on the loop's monotonic
+clock; scheduling against these absolute deadlines (not "sleep one period after the last
+tick") means the sleep overshoot of one tick does not delay the next ones, so jitter never
+accumulates. ``phase`` spreads the robots of a cell over the period, so their ticks do not all
+fall due at the same instant.
+
+Every clock of one event loop runs on one shared timer (:class:`_Wheel`): a single
+``loop.call_at`` for the earliest deadline, which runs every clock due and re-arms. A cell of
+fifty robots costs one timer callback per due deadline, not fifty sleeping tasks.
 
 When the loop falls behind (a long callback, a busy machine), late ticks run back to back until
-the clock has caught up; after more than ``MAX_BEHIND`` seconds behind it gives up and re-bases
-the deadlines (``overruns`` counts that), so a suspended process does not replay minutes.
+the clock has caught up (each in its own loop iteration, so requests are still answered in
+between); after more than ``MAX_BEHIND`` seconds behind it gives up and re-bases the deadlines
+(``overruns`` counts that), so a suspended process does not replay minutes.
 """
 
 from __future__ import annotations
 
 import asyncio
+import heapq
+import itertools
 import logging
+import weakref
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -46,6 +56,68 @@ class JitterStats:
         )
 
 
+class _Wheel:
+    """The clocks of one event loop on one timer: a heap of ``(deadline, seq, clock)``.
+
+    Entries go stale when a clock stops or ticks through :meth:`IpoClock.poll` (its deadline
+    moved on); they are skipped when they reach the top.
+    """
+
+    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+        self.loop = loop
+        self._heap: list[tuple[float, int, IpoClock]] = []
+        self._seq = itertools.count()
+        self._handle: asyncio.TimerHandle | None = None
+        self._when = float("inf")
+
+    def push(self, clock: IpoClock) -> None:
+        heapq.heappush(self._heap, (clock._deadline, next(self._seq), clock))
+        self._arm()
+
+    def _arm(self) -> None:
+        heap = self._heap
+        while heap and (not heap[0][2]._running or heap[0][0] != heap[0][2]._deadline):
+            heapq.heappop(heap)
+        when = heap[0][0] if heap else float("inf")
+        if when == self._when:
+            return
+        if self._handle is not None:
+            self._handle.cancel()
+            self._handle = None
+        self._when = when
+        if heap:
+            self._handle = self.loop.call_at(when, self._fire)
+
+    def _fire(self) -> None:
+        self._handle, self._when = None, float("inf")
+        loop, heap = self.loop, self._heap
+        now = loop.time()
+        due: list[IpoClock] = []
+        while heap and heap[0][0] <= now:
+            deadline, _, clock = heapq.heappop(heap)
+            if clock._running and deadline == clock._deadline:
+                due.append(clock)
+        for clock in due:
+            if clock._running:
+                clock._tick(loop.time())
+                heapq.heappush(heap, (clock._deadline, next(self._seq), clock))
+        # a clock still behind is due again at once: call_at(past) runs in the next loop
+        # iteration, after the I/O that is ready (requests are answered between late ticks)
+        self._arm()
+
+
+_WHEELS: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, _Wheel] = (
+    weakref.WeakKeyDictionary()
+)
+
+
+def _wheel(loop: asyncio.AbstractEventLoop) -> _Wheel:
+    wheel = _WHEELS.get(loop)
+    if wheel is None:
+        wheel = _WHEELS[loop] = _Wheel(loop)
+    return wheel
+
+
 class IpoClock:
     """Calls ``callback()`` once per interpolation cycle until :meth:`stop`."""
 
@@ -55,19 +127,24 @@ class IpoClock:
         *,
         ipo: float = 0.012,
         speed: float = 1.0,
+        phase: float = 0.0,
         keep: int = 100_000,
     ) -> None:
         if ipo <= 0 or speed <= 0:
             raise ValueError("ipo and speed must be positive")
+        if not phase >= 0:
+            raise ValueError("phase must be >= 0")
         self.callback = callback
         self.ipo = ipo
         self.speed = speed
+        #: Wall seconds the deadline grid is shifted by (robots of a cell spread their ticks).
+        self.phase = phase
         self.ticks = 0
         self.overruns = 0
         #: Lateness of the most recent ticks (s), for the jitter benchmark.
         self.jitter: deque[float] = deque(maxlen=keep)
-        self._task: asyncio.Task[None] | None = None
-        self._loop: asyncio.AbstractEventLoop | None = None
+        self._wheel: _Wheel | None = None
+        self._running = False
         self._start = 0.0
         self._n = 0
         self._deadline = float("inf")
@@ -79,20 +156,24 @@ class IpoClock:
 
     @property
     def running(self) -> bool:
-        return self._task is not None and not self._task.done()
+        return self._running
 
     def start(self) -> None:
-        if self._task is None:
-            self._task = asyncio.get_running_loop().create_task(self._run(), name="ipo-clock")
+        """Start ticking (on the running event loop); the first tick is one period away."""
+        if self._running:
+            return
+        loop = asyncio.get_running_loop()
+        self._wheel = _wheel(loop)
+        self._start = loop.time() + self.phase
+        self._n = 1
+        self._deadline = self._start + self.period
+        self._running = True
+        self._wheel.push(self)
 
     async def stop(self) -> None:
-        task, self._task = self._task, None
-        if task is not None:
-            task.cancel()
-            try:
-                await task
-            except asyncio.CancelledError:
-                pass
+        self._running = False
+        if self._wheel is not None:
+            self._wheel._arm()  # drops this clock's entry; no timer is left for an empty wheel
 
     def poll(self) -> None:
         """Run the tick now if it is due.
@@ -102,8 +183,10 @@ class IpoClock:
         turn, so the tick would wait behind all of them. Polling here bounds the lateness by one
         client's batch instead.
         """
-        if self._loop is not None and self._loop.time() >= self._deadline:
-            self._tick(self._loop.time())
+        wheel = self._wheel
+        if self._running and wheel is not None and wheel.loop.time() >= self._deadline:
+            self._tick(wheel.loop.time())
+            wheel.push(self)  # the entry of the old deadline is stale now
 
     def _tick(self, now: float) -> None:
         late = now - self._deadline
@@ -119,25 +202,6 @@ class IpoClock:
             self.callback()
         except Exception:  # a bug in one tick must not stop the robot's clock for good
             log.exception("IPO tick failed")
-
-    async def _run(self) -> None:
-        loop = asyncio.get_running_loop()
-        self._start = loop.time()
-        self._n = 1
-        self._deadline = self._start + self.period
-        self._loop = loop
-        try:
-            while True:
-                delay = self._deadline - loop.time()
-                if delay > 0:
-                    await asyncio.sleep(delay)
-                now = loop.time()
-                if now >= self._deadline:  # poll() may have run this tick already
-                    self._tick(now)
-                if self._deadline <= loop.time():
-                    await asyncio.sleep(0)  # catching up: still let the server answer requests
-        finally:
-            self._loop = None
 
     def stats(self) -> JitterStats:
         """p50 / p99 / max / mean lateness of the recorded ticks."""
