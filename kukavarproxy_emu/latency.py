@@ -27,8 +27,10 @@ import itertools
 import math
 import random
 import statistics
+import sys
 import threading
 import time
+import weakref
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -43,6 +45,7 @@ __all__ = [
     "ServiceQueue",
     "ServiceTime",
     "resolve_profile",
+    "tick_gate",
 ]
 
 Kind = Literal["read", "write"]
@@ -264,12 +267,24 @@ class ServiceQueue:
     deadline on the :class:`DeadlineTimer` and then computes the reply, so N busy clients each
     see about N times the single-client latency, as on the real controller, and a client's own
     pacing does not change the latency it sees.
+
+    The simulated robot shares the event loop, so its IPO tick could make a reply late (a tick
+    running at the deadline) or a request's deadline late (a tick running when the request
+    arrives). The queues of a loop therefore publish their booked deadlines, :func:`tick_gate`
+    lets a tick run only when the next reply is further away than the tick takes, and booking a
+    request releases the ticks held meanwhile (``motion.clock.release``): they run in the
+    shadow of the reply just booked, which is at least the profile's floor away.
     """
 
     def __init__(self, profile: LatencyProfile, rng: random.Random) -> None:
         self.profile = profile
         self.scheduler = Scheduler(profile, rng)
         self.served = 0
+        #: Deadlines booked and not yet answered (time.monotonic()), earliest first.
+        self.pending: deque[float] = deque()
+        #: When the last reply was computed (time.monotonic()).
+        self.last_reply = -math.inf
+        self._loop: asyncio.AbstractEventLoop | None = None
 
     async def run(self, kind: Kind, compute: Callable[[], T], weight: int = 1) -> T:
         """Answer with ``compute()`` after ``weight`` sampled service times of ``kind``.
@@ -278,7 +293,51 @@ class ServiceQueue:
         row (a C3 Bridge read-multiple of N variables).
         """
         deadline = self.scheduler.reserve(kind, time.monotonic(), weight)
-        await TIMER.wait_until(deadline)
+        if self._loop is None:
+            self._loop = asyncio.get_running_loop()
+            _QUEUES.setdefault(self._loop, weakref.WeakSet()).add(self)
+        self.pending.append(deadline)
+        _release_ticks(self._loop)
+        try:
+            await TIMER.wait_until(deadline)
+        finally:
+            self.pending.remove(deadline)
         self.scheduler.answered(deadline, time.monotonic())
         self.served += 1
-        return compute()
+        reply = compute()
+        self.last_reply = time.monotonic()
+        return reply
+
+
+_QUEUES: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, weakref.WeakSet[ServiceQueue]] = (
+    weakref.WeakKeyDictionary()
+)
+#: Room kept between a tick's expected end and the next reply (s).
+TICK_MARGIN = 0.0003
+#: A worker idle for less than this since its last reply expects the client's next request:
+#: a tick waits for it (to run in its shadow) rather than delay its booking (s).
+CLIENT_TURNAROUND = 0.003
+
+
+def tick_gate(loop: asyncio.AbstractEventLoop) -> Callable[[float], bool]:
+    """The gate of the IPO clocks on ``loop`` (see :class:`ServiceQueue`): ``gate(cost)`` is
+    True when a tick taking ``cost`` seconds delays neither a reply nor a request's booking."""
+
+    def gate(cost: float) -> bool:
+        queues = _QUEUES.get(loop)
+        if not queues:
+            return True
+        now = time.monotonic()
+        earliest = min((q.pending[0] for q in queues if q.pending), default=None)
+        if earliest is None:
+            return all(now - q.last_reply >= CLIENT_TURNAROUND for q in queues)
+        return earliest - now >= 1.5 * cost + TICK_MARGIN
+
+    return gate
+
+
+def _release_ticks(loop: asyncio.AbstractEventLoop) -> None:
+    # late import: the motion package (numpy, the kernel) loads only when a robot runs
+    clock = sys.modules.get("kukavarproxy_emu.motion.clock")
+    if clock is not None:
+        clock.release(loop)

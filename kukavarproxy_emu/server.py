@@ -561,6 +561,11 @@ class Emulator:
             torque_noise=cfg.torque_noise,
             obstacles=cfg.obstacles,
         )
+        if self.latency is not None:
+            # replies first: the robot's tick runs where it delays no reply (latency.tick_gate)
+            from .latency import tick_gate
+
+            self.robot.clock.gate = tick_gate(asyncio.get_running_loop())
         self.robot.start()
 
     async def _start_discovery(self) -> None:

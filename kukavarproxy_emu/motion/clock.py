@@ -13,6 +13,15 @@ Every clock of one event loop runs on one shared timer (:class:`_Wheel`): a sing
 ``loop.call_at`` for the earliest deadline, which runs every clock due and re-arms. A cell of
 fifty robots costs one timer callback per due deadline, not fifty sleeping tasks.
 
+**Replies first.** With a latency profile the emulator answers each request at an absolute
+deadline; a tick running at that instant would make the reply late, and a tick running while
+a request arrives makes its deadline late (it is booked when the loop reads it). A clock may
+therefore have a ``gate``: at its deadline the tick runs only if the gate says the loop is
+free for the tick's expected cost (the next reply is far enough away); otherwise it is held
+until :func:`release` (called when a request has just been booked, i.e. in the shadow of a
+reply that is at least a service time away) or for at most ``max_hold`` seconds. A held tick
+is late, never skipped: simulated time still advances exactly one ``ipo`` per tick.
+
 When the loop falls behind (a long callback, a busy machine), late ticks run back to back until
 the clock has caught up (each in its own loop iteration, so requests are still answered in
 between); after more than ``MAX_BEHIND`` seconds behind it gives up and re-bases the deadlines
@@ -25,12 +34,13 @@ import asyncio
 import heapq
 import itertools
 import logging
+import time
 import weakref
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
-__all__ = ["IpoClock", "JitterStats"]
+__all__ = ["IpoClock", "JitterStats", "release"]
 
 log = logging.getLogger(__name__)
 
@@ -69,14 +79,17 @@ class _Wheel:
         self._seq = itertools.count()
         self._handle: asyncio.TimerHandle | None = None
         self._when = float("inf")
+        #: Clocks whose due tick waits for :meth:`release` (or for their hold to run out).
+        self.held: set[IpoClock] = set()
 
     def push(self, clock: IpoClock) -> None:
-        heapq.heappush(self._heap, (clock._deadline, next(self._seq), clock))
+        clock._wake = clock._deadline
+        heapq.heappush(self._heap, (clock._wake, next(self._seq), clock))
         self._arm()
 
     def _arm(self) -> None:
         heap = self._heap
-        while heap and (not heap[0][2]._running or heap[0][0] != heap[0][2]._deadline):
+        while heap and (not heap[0][2]._running or heap[0][0] != heap[0][2]._wake):
             heapq.heappop(heap)
         when = heap[0][0] if heap else float("inf")
         if when == self._when:
@@ -94,16 +107,32 @@ class _Wheel:
         now = loop.time()
         due: list[IpoClock] = []
         while heap and heap[0][0] <= now:
-            deadline, _, clock = heapq.heappop(heap)
-            if clock._running and deadline == clock._deadline:
+            wake, _, clock = heapq.heappop(heap)
+            if clock._running and wake == clock._wake:
                 due.append(clock)
         for clock in due:
-            if clock._running:
+            if not clock._running:
+                continue
+            if clock._may_tick(now):
                 clock._tick(loop.time())
-                heapq.heappush(heap, (clock._deadline, next(self._seq), clock))
+                clock._wake = clock._deadline
+            else:  # held: until release() or the hold runs out
+                clock._holding = True
+                clock._wake = clock._deadline + clock.max_hold
+                self.held.add(clock)
+            heapq.heappush(heap, (clock._wake, next(self._seq), clock))
         # a clock still behind is due again at once: call_at(past) runs in the next loop
         # iteration, after the I/O that is ready (requests are answered between late ticks)
         self._arm()
+
+    def release(self) -> None:
+        """Run the held ticks now: a request was just booked, so its reply is a service time
+        away, the best moment the tick will get (even if it is longer than that)."""
+        held, self.held = self.held, set()
+        for clock in held:
+            if clock._running and clock._deadline <= self.loop.time():
+                clock._tick(self.loop.time())
+                self.push(clock)
 
 
 _WHEELS: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, _Wheel] = (
@@ -118,6 +147,14 @@ def _wheel(loop: asyncio.AbstractEventLoop) -> _Wheel:
     return wheel
 
 
+def release(loop: asyncio.AbstractEventLoop | None = None) -> None:
+    """Run the ticks held by their gate on ``loop`` (default: the running loop) if they may
+    run now; the latency worker calls it right after booking a request."""
+    wheel = _WHEELS.get(loop if loop is not None else asyncio.get_running_loop())
+    if wheel is not None and wheel.held:
+        wheel.release()
+
+
 class IpoClock:
     """Calls ``callback()`` once per interpolation cycle until :meth:`stop`."""
 
@@ -128,6 +165,8 @@ class IpoClock:
         ipo: float = 0.012,
         speed: float = 1.0,
         phase: float = 0.0,
+        gate: Callable[[float], bool] | None = None,
+        max_hold: float = 0.003,
         keep: int = 100_000,
     ) -> None:
         if ipo <= 0 or speed <= 0:
@@ -139,6 +178,14 @@ class IpoClock:
         self.speed = speed
         #: Wall seconds the deadline grid is shifted by (robots of a cell spread their ticks).
         self.phase = phase
+        #: ``gate(cost)``: may a tick expected to take ``cost`` seconds run now? None: always.
+        self.gate = gate
+        #: Longest wall time a gate may hold a due tick (s).
+        self.max_hold = max_hold
+        #: Running estimate of one tick's wall time (s), what the gate is asked about.
+        self.cost = 0.0
+        #: Ticks that ran late because the gate held them.
+        self.held = 0
         self.ticks = 0
         self.overruns = 0
         #: Lateness of the most recent ticks (s), for the jitter benchmark.
@@ -148,6 +195,8 @@ class IpoClock:
         self._start = 0.0
         self._n = 0
         self._deadline = float("inf")
+        self._wake = float("inf")
+        self._holding = False
 
     @property
     def period(self) -> float:
@@ -184,9 +233,19 @@ class IpoClock:
         client's batch instead.
         """
         wheel = self._wheel
-        if self._running and wheel is not None and wheel.loop.time() >= self._deadline:
-            self._tick(wheel.loop.time())
+        if wheel is None or not self._running:
+            return
+        now = wheel.loop.time()
+        if now >= self._deadline and self._may_tick(now):
+            self._tick(now)
+            wheel.held.discard(self)
             wheel.push(self)  # the entry of the old deadline is stale now
+
+    def _may_tick(self, now: float) -> bool:
+        gate = self.gate
+        if gate is None or now - self._deadline >= self.max_hold:
+            return True
+        return gate(self.cost)
 
     def _tick(self, now: float) -> None:
         late = now - self._deadline
@@ -195,13 +254,21 @@ class IpoClock:
             log.warning("IPO clock %.0f ms behind; skipping ticks", late * 1e3)
             self._start, self._n = now, 0
         self.jitter.append(max(late, 0.0))
+        if self._holding:
+            self.held += 1
+            self._holding = False
         self.ticks += 1
         self._n += 1
         self._deadline = self._start + self._n * self.period
+        t0 = time.thread_time()
         try:
             self.callback()
         except Exception:  # a bug in one tick must not stop the robot's clock for good
             log.exception("IPO tick failed")
+        # CPU time, not wall time: a tick the OS preempted on a busy machine is no more work
+        spent = time.thread_time() - t0
+        # quick to learn an expensive tick (a motion starts), slower to forget it
+        self.cost = spent if spent > self.cost else 0.8 * self.cost + 0.2 * spent
 
     def stats(self) -> JitterStats:
         """p50 / p99 / max / mean lateness of the recorded ticks."""
