@@ -125,6 +125,10 @@ class VariableStore:
         # lazy values (see defer): the stale base names and the callback that fills them
         self._stale: frozenset[str] = frozenset()
         self._fill: Callable[[], None] | None = None
+        #: Changes of any variable so far, and per variable (base name): a KRL pass that read
+        #: only unchanged variables and wrote nothing would do exactly the same again.
+        self.mutations = 0
+        self._versions: dict[str, int] = {}
         if system:
             for sv in system_variables(overrides):
                 self.declare(sv.name, sv.type_name, sv.dims, sv.init, sv.read_only, sv.value_range)
@@ -186,6 +190,7 @@ class VariableStore:
         var.read_only = read_only
         self._vars[key] = var
         self._text.pop(key, None)
+        self._bump(key)
 
     def load_dat(self, dat: DatFile | str, *, all_global: bool | None = None) -> list[str]:
         """Declare the globals of a data list (text or parsed); returns the names declared.
@@ -333,6 +338,7 @@ class VariableStore:
             var.elems[:n] = values
             texts = var.elem_text
             self._text.pop(var.name, None)
+            self._bump(var.name)
             if texts is not None:  # keep the per-element texts warm: no cold re-formatting
                 if kind is Kind.INT:
                     texts[:n] = map(str, words[:n])
@@ -429,6 +435,8 @@ class VariableStore:
         """
         self._stale = frozenset(n.strip().upper() for n in names)
         self._fill = fill
+        for name in self._stale:  # their values change when they are filled
+            self._bump(name)
 
     def _refresh(self) -> None:
         fill, self._fill = self._fill, None
@@ -521,11 +529,21 @@ class VariableStore:
         var.elems[slot] = new_elem
         self._changed(var, slot)
 
+    def _bump(self, base: str) -> None:
+        self.mutations += 1
+        self._versions[base] = self._versions.get(base, 0) + 1
+
+    def version(self, base: str) -> int:
+        """How often variable ``base`` (upper-case, no index) has changed: equal numbers,
+        equal value."""
+        return self._versions.get(base, 0)
+
     def _changed(self, var: Var, slot: int | None) -> None:
         """Drop the cached texts of ``var``. A changed element of an array that is read whole
         gets its text at once: one format per write, so a whole-array read never has to
         format hundreds of elements in one go (512 E6AXIS: ~10 ms)."""
         self._text.pop(var.name, None)
+        self._bump(var.name)
         texts = var.elem_text
         if texts is not None:
             if slot is None:

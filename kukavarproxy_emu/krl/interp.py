@@ -43,7 +43,7 @@ from pyopenshowvar.krl import KrlValue
 
 from . import ast
 from .interp_expr import ExprMixin
-from .interp_motion import BUDGET, WAIT, MotionMixin
+from .interp_motion import AT_ONCE, BUDGET, PASS, WAIT, MotionMixin
 from .runtime import (
     ACTUAL_POSITION,
     HEAVY_ELEMENTS,
@@ -132,6 +132,14 @@ class Interpreter(ExprMixin, MotionMixin):
         self.sim_time = 0.0
         self._gen: Gen | None = None
         self._reads: dict[int, bool] = {}
+        #: The variables (and their versions) the last cycle read, when it ran from a repeating
+        #: point to the same point and changed nothing (see _cycle); None otherwise.
+        self._quiet: list[tuple[VariableStore, str, int]] | None = None
+        self._at_pass: int | None = None  # the LOOP whose boundary the last cycle ended at
+        self._pass_loop: int | None = None
+        self._quiet_idle: bytes | None = None
+        #: Passes skipped because they would have done exactly what the previous one did.
+        self.skipped = 0
         self._user_calls: dict[int, bool] = {}
         self._local_sizes: dict[int, int] = {}
         #: Elements of the locals of the routines on the call stack now.
@@ -143,12 +151,68 @@ class Interpreter(ExprMixin, MotionMixin):
         self.frames.clear()
         self.local_elements = 0
         self.finished = self.halted = False
+        self._quiet = self._at_pass = None
         self._gen = self._main()
 
     def step(self) -> None:
         """Run one cycle's worth of statements; raises :class:`KrlRuntimeError`."""
         if self._gen is None or self.finished or self.halted:
             return
+        self._cycle()
+
+    def _idle_at(self) -> bytes | None:
+        """The robot interpreter's kernel state a repeated cycle depends on: the planned end
+        point while nothing moves or waits (None while something does)."""
+        kernel = self.kernel
+        if kernel is None:
+            return b""
+        if kernel.moving or kernel.queued:
+            return None
+        return bytes(kernel.planned_q.tobytes())
+
+    def _cycle(self) -> None:
+        """One cycle, skipped when it would repeat the previous one exactly.
+
+        A cycle that ran from a repeating point to the same point — the end of the submit
+        interpreter's LOOP body, or a robot program's motion that completed at once (``LOOP PTP
+        MYAXIS C_PTP ENDLOOP`` with the robot on MYAXIS) — and wrote nothing (every assignment
+        found its target equal) depends only on what it read and, for the robot interpreter,
+        on the kernel standing still at the same planned point. While none of those variables
+        changed, the next cycle would read the same values and again write nothing. A default
+        robot at rest (follow + sps.sub) then costs nothing here until something changes,
+        which a cell of robots needs.
+        """
+        quiet = self._quiet
+        if quiet is not None:
+            if self._idle_at() == self._quiet_idle and all(
+                store.version(base) == version for store, base, version in quiet
+            ):
+                self.skipped += 1
+                return
+            self._quiet = None
+        start = self._at_pass
+        idle = self._idle_at()
+        stores = [self.store, *(f.store for f in self.frames)]
+        before = [st.mutations for st in stores]
+        reads: set[tuple[VariableStore, str]] = set()
+        self.ev.reads = reads
+        try:
+            reason = self._run()
+        finally:
+            self.ev.reads = None
+        self._at_pass = self._pass_loop if reason in (PASS, AT_ONCE) else None
+        if (
+            start is not None
+            and start == self._at_pass
+            and idle is not None
+            and idle == self._idle_at()
+            and len(self.frames) + 1 == len(stores)
+            and [st.mutations for st in stores] == before
+        ):
+            self._quiet = [(st, base, st.version(base)) for st, base in reads]
+            self._quiet_idle = idle
+
+    def _run(self) -> str | None:
         self.count = self.at_once = 0
         self._check_at = CHECK_EVERY
         now = time.perf_counter()
@@ -158,8 +222,9 @@ class Interpreter(ExprMixin, MotionMixin):
         share = max(TIME_FLOOR, TIME_SHARE * (now - self._ended))
         self._until = now + min(TIME_BUDGET, share)
         self._plan_until = now + TIME_BUDGET
+        assert self._gen is not None
         try:
-            next(self._gen)
+            return next(self._gen)
         except StopIteration:
             self.finished = True
             self._gen = None
@@ -174,6 +239,7 @@ class Interpreter(ExprMixin, MotionMixin):
             raise KrlRuntimeError("call stack overflow (endless recursion?)") from None
         finally:
             self._ended = time.perf_counter()
+        return None
 
     def _main(self) -> Gen:
         yield from self._invoke(self.module.main, (), self.module.main)
@@ -399,7 +465,8 @@ class Interpreter(ExprMixin, MotionMixin):
             if signal is not None:
                 return None if signal is _EXIT else signal
             if self.submit:
-                yield WAIT  # the SPS runs its LOOP body once per cycle
+                self._pass_loop = id(stmt)
+                yield PASS  # the SPS runs its LOOP body once per cycle
             yield from self._tick()
 
     def _for(self, stmt: ast.For) -> Gen:

@@ -29,10 +29,14 @@ if TYPE_CHECKING:
     from ..store import VariableStore
     from .runtime import Evaluator
 
-__all__ = ["BUDGET", "HOME_AXES", "WAIT", "MotionMixin"]
+__all__ = ["AT_ONCE", "BUDGET", "HOME_AXES", "PASS", "WAIT", "MotionMixin"]
 
 #: What a statement generator yields: the reason it waits for the next cycle.
 BUDGET, WAIT = "budget", "wait"
+#: The submit interpreter finished one pass of its LOOP.
+PASS = "pass"
+#: The robot program waits after motions that completed at once (the robot is on the target).
+AT_ONCE = "at-once"
 #: Home position of the KR 6 R900 sixx (used for ``PTP HOME`` without an XHOME variable).
 HOME_AXES = (0.0, -90.0, 90.0, 0.0, 0.0, 0.0)
 _AXES = tuple(f"A{i}" for i in range(1, 7))
@@ -43,6 +47,7 @@ class MotionMixin:
     """The motion part of :class:`~.interp.Interpreter` (needs its attributes below)."""
 
     kernel: MotionKernel | None
+    _pass_loop: int | None
     store: VariableStore
     ev: Evaluator
     at_once: int
@@ -59,6 +64,8 @@ class MotionMixin:
 
     def advance(self) -> int:
         """``$ADVANCE`` (0..5)."""
+        if self.ev.reads is not None:
+            self.ev.reads.add((self.store, "$ADVANCE"))
         value = self.store.get("$ADVANCE")
         return value if isinstance(value, int) and not isinstance(value, bool) else 3
 
@@ -92,7 +99,8 @@ class MotionMixin:
         if not kernel.moving:  # completed at once: the robot stands on the target
             self.at_once += 1
             if self.at_once > 1:
-                yield WAIT  # a loop of such motions runs once per cycle, it does not spin
+                self._pass_loop = id(stmt)
+                yield AT_ONCE  # a loop of such motions runs once per cycle, it does not spin
 
     def _index_text(self, expr: ast.Expr) -> str:
         try:

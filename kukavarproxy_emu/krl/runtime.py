@@ -178,6 +178,8 @@ class Evaluator:
         self._globals = set(store.names())
         #: Set when an evaluation copied a large array (the executor checks its clock).
         self.heavy = False
+        #: While not None, every variable read is recorded here as (store, base name).
+        self.reads: set[tuple[VariableStore, str]] | None = None
 
     # --- references ----------------------------------------------------------------------------
     def scope(self, name: str, node: ast.Node) -> VariableStore:
@@ -244,7 +246,9 @@ class Evaluator:
                 if not isinstance(base, Struct) or expr.member not in base:
                     raise KrlRuntimeError(f"no member {expr.member}", expr)
                 return base[expr.member]
-            store, text, _ = self.ref(expr)
+            store, text, name = self.ref(expr)
+            if self.reads is not None:
+                self.reads.add((store, name.name))
             try:
                 value = store.get(text)
             except UnknownVariable:
@@ -357,6 +361,8 @@ class Evaluator:
         var = _var(store, base)
         if var is not None:
             value = self._convert(value, var, store, text, node)
+        if self.reads is not None:
+            self.reads.add((store, base))
         try:
             if store.get(text) == value:
                 return  # nothing observable changes: keep the store's read cache warm

@@ -78,7 +78,7 @@ def test_sync_client_reads_one_structure_in_one_request(emu: EmulatorThread) -> 
         first = kvp.read_snapshot(ONE)  # may be the pass before the write: at most one old
         before = emu.emulator.stats.requests
         reading = kvp.read_snapshot(ONE)
-        assert emu.emulator.stats.requests - before == 1
+        assert emu.emulator.stats.requests - before == 1, emu.emulator.stats
         for _ in range(200):
             if reading["MYINT"] == 42:
                 break
