@@ -14,6 +14,7 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from .cell import Cell, cell_configs
     from .config import EmulatorConfig
     from .faults import Fault, FaultSet
     from .handler import Responder, build_store
@@ -25,6 +26,8 @@ if TYPE_CHECKING:
 # Imported on first use, so `import kukavarproxy_emu.datfile` (or the store) does not pull in
 # asyncio and the server.
 _LAZY = {
+    "Cell": "cell",
+    "cell_configs": "cell",
     "EmulatorConfig": "config",
     "Fault": "faults",
     "FaultSet": "faults",
@@ -50,6 +53,7 @@ def __getattr__(name: str) -> Any:
 
 __all__ = [
     "PROFILES",
+    "Cell",
     "ConnectionInfo",
     "Emulator",
     "EmulatorConfig",
@@ -62,4 +66,5 @@ __all__ = [
     "ServiceTime",
     "Stats",
     "build_store",
+    "cell_configs",
 ]

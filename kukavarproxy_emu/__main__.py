@@ -2,7 +2,8 @@
 
 Plain argparse so the emulator needs nothing beyond the standard library (and numpy through
 the store). The first line on stdout, flushed, is ``listening on HOST:PORT`` with the real
-port, so scripts can start it with ``--port 0`` and read where it went. SIGINT and SIGTERM stop
+port, so scripts can start it with ``--port 0`` and read where it went (``--robots N``: N such
+lines, robot ``k`` on ``PORT + k``). SIGINT and SIGTERM stop
 it cleanly with exit status 0, within ``STOP_DEADLINE`` seconds whatever runs: a watchdog
 thread, woken by the signal itself (``signal.set_wakeup_fd``, which works even while the main
 thread is busy), ends the process if the clean stop has not finished by then, and at once on a
@@ -23,6 +24,7 @@ import threading
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from .cell import Cell, cell_configs
 from .config import (
     DEFAULT_PORT,
     DEFAULT_UDP_PORT,
@@ -36,7 +38,6 @@ from .config import (
 from .faults import Fault
 from .latency import PROFILES
 from .plant import PLANTS, Obstacle
-from .server import Emulator
 
 __all__ = ["build_parser", "config_from_args", "main"]
 
@@ -196,6 +197,14 @@ def build_parser(prog: str = "kukavarproxy-emu") -> argparse.ArgumentParser:
     rob.add_argument(
         "--no-robot", dest="robot", action="store_false", help="static variables, no motion"
     )
+    rob.add_argument(
+        "--robots",
+        type=int,
+        default=1,
+        metavar="N",
+        help="a cell: N independent robots in this process on ports PORT..PORT+N-1 (each its"
+        " own store, program and seed SEED+k; one 'listening on' line each; default 1)",
+    )
     parser.add_argument(
         "--log-level",
         default="warning",
@@ -237,21 +246,23 @@ def config_from_args(args: argparse.Namespace) -> EmulatorConfig:
     )
 
 
-async def serve(config: EmulatorConfig) -> None:
-    """Run until SIGINT/SIGTERM."""
+async def serve(config: EmulatorConfig, robots: int = 1) -> None:
+    """Run until SIGINT/SIGTERM; ``robots > 1`` serves a cell (:mod:`.cell`)."""
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     restore = _arm_stop_signals(loop, stop)
     try:
-        async with Emulator(config) as emu:
+        async with Cell(cell_configs(config, robots)) as cell:
             # This process is the emulator's alone: what start-up built (store, robot, numpy,
             # the physics) lives as long as the process, so the cyclic collector need not scan
             # it again. A full collection then scans only what was created since: under a flood
             # of requests an 86 ms pause became < 1 ms.
             gc.freeze()
-            print(f"listening on {emu.host}:{emu.port}", flush=True)
+            for emu in cell.emulators:
+                print(f"listening on {emu.host}:{emu.port}", flush=True)
             await stop.wait()
-            log.info("stopping (%d requests served)", emu.stats.requests)
+            served = sum(emu.stats.requests for emu in cell.emulators)
+            log.info("stopping (%d requests served)", served)
     finally:
         restore()
 
@@ -315,10 +326,11 @@ def main(argv: Sequence[str] | None = None, *, prog: str = "kukavarproxy-emu") -
     )
     try:
         config = config_from_args(args)
+        cell_configs(config, args.robots)  # a bad count or port range is a usage error
     except (ValueError, OSError) as exc:
         parser.error(str(exc))
     try:
-        asyncio.run(serve(config))
+        asyncio.run(serve(config, args.robots))
     except KeyboardInterrupt:
         pass
     except (OSError, ValueError) as exc:  # port in use, bad --config, KRL syntax error

@@ -108,6 +108,9 @@ class EmulatorConfig:
     speed: float = 1.0
     #: Interpolation cycle, simulated seconds (KRC4: 12 ms).
     ipo: float = 0.012
+    #: Wall seconds the robot's IPO deadlines are shifted by: the robots of a cell
+    #: (:mod:`kukavarproxy_emu.cell`) spread their ticks over the period instead of all at once.
+    ipo_phase: float = 0.0
     #: The physical robot: "dynamic" (MuJoCo rigid bodies, servos, friction, sensor noise) or
     #: "ideal" (measured = set-point, statics torques: exact values); see kukavarproxy_emu.plant.
     plant: str = "dynamic"
@@ -147,6 +150,8 @@ class EmulatorConfig:
             raise ValueError(f"--sps needs 'sps', 'none' or a .sub/.src file, not {self.sps!r}")
         if not (self.speed > 0 and self.ipo > 0):
             raise ValueError("speed and ipo must be > 0")
+        if not 0 <= self.ipo_phase < self.ipo / self.speed:
+            raise ValueError("ipo_phase must be in [0, ipo / speed)")
         if any(n is not None and not n >= 0 for n in (self.noise, self.torque_noise)):
             raise ValueError("noise levels must be >= 0")
         if self.plant not in PLANTS:

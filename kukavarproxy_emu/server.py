@@ -554,6 +554,7 @@ class Emulator:
             sps=cfg.sps,
             ipo=cfg.ipo,
             speed=cfg.speed,
+            phase=cfg.ipo_phase,
             noise=cfg.noise,
             seed=cfg.seed,
             plant=cfg.plant,

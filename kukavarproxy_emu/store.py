@@ -433,7 +433,10 @@ class VariableStore:
         looks: a robot nobody reads costs no formatting. A later ``defer`` replaces an
         earlier one that was never filled.
         """
-        self._stale = frozenset(n.strip().upper() for n in names)
+        # a frozenset is taken as it is (the robot defers the same names every cycle)
+        self._stale = names if isinstance(names, frozenset) else frozenset(
+            n.strip().upper() for n in names
+        )
         self._fill = fill
         for name in self._stale:  # their values change when they are filled
             self._bump(name)

@@ -135,9 +135,7 @@ class _Wheel:
                 self.push(clock)
 
 
-_WHEELS: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, _Wheel] = (
-    weakref.WeakKeyDictionary()
-)
+_WHEELS: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, _Wheel] = weakref.WeakKeyDictionary()
 
 
 def _wheel(loop: asyncio.AbstractEventLoop) -> _Wheel:

@@ -168,6 +168,9 @@ class MotionKernel(Publisher):
         self.active: list[Segment] = []  # running; two while blending
         self.pending: deque[Segment] = deque()  # planned by the advance run, not started
         self.planned_q = q0.copy()  # end of the last planned motion (base of *_REL)
+        # the q and planned_q objects of a cycle that found the robot still (see tick)
+        self._still_q: FloatArray | None = None
+        self._still_planned: FloatArray | None = None
         self._q_base = q0.copy()  # PTP: q = base + Σ delta·s
         self._lin_base = np.eye(4)  # LIN: TCP pose in $BASE the running segments add to
         self._frames: tuple[FloatArray, FloatArray] = (np.zeros(6), np.zeros(6))
@@ -432,17 +435,30 @@ class MotionKernel(Publisher):
         dt = self.ipo
         ov = self.store.get("$OV_PRO")
         target = 0.0 if self.hold else float(ov) / 100.0  # type: ignore[arg-type]
-        self.rate = self._slew(target, dt) if self.active else target
-        q_old = self.q
-        self._advance(dt * self.rate)
-        q_new = self._position()
-        qd = (q_new - q_old) / dt
-        self.qdd = (qd - self.qd) / dt
-        self.qd, self.q = qd, q_new
+        if (
+            not self.active
+            and not self.pending
+            and self.q is self._still_q
+            and self.planned_q is self._still_planned
+        ):
+            # Standing on the planned point, nothing to run: this cycle would compute the
+            # same position, zero speed and acceleration again (most cycles of a cell at rest).
+            self.rate = target
+        else:
+            self.rate = self._slew(target, dt) if self.active else target
+            q_old = self.q
+            self._advance(dt * self.rate)
+            q_new = self._position()
+            qd = (q_new - q_old) / dt
+            self.qdd = (qd - self.qd) / dt
+            self.qd, self.q = qd, q_new
+            still = not self.active and not self.pending and not qd.any() and not self.qdd.any()
+            if still and np.array_equal(q_new, self.planned_q):
+                self._still_q, self._still_planned = self.q, self.planned_q
         self.time += dt
         self.ticks += 1
         if self.trace is not None:
-            self.trace.append((self.time, q_new.copy(), qd.copy()))
+            self.trace.append((self.time, self.q.copy(), self.qd.copy()))
         self.publish()
 
     def _slew(self, target: float, dt: float) -> float:

@@ -55,6 +55,7 @@ class Robot:
         sps: str | Path | None = "sps",
         ipo: float = 0.012,
         speed: float = 1.0,
+        phase: float = 0.0,
         model: RobotModel = KR6R900SIXX,
         noise: float | None = None,
         seed: int | None = None,
@@ -92,7 +93,7 @@ class Robot:
 
             self.sps = KrlSubmit(load_module(sps), store, ipo=ipo)
             self.sps.start()
-        self.clock = IpoClock(self.tick, ipo=ipo, speed=speed)
+        self.clock = IpoClock(self.tick, ipo=ipo, speed=speed, phase=phase)
         #: True while the robot program runs (False after a stop or with no program).
         self.running = False
         #: The last error message ("" when none).

@@ -26,10 +26,10 @@ from .params import FloatArray
 __all__ = ["MOTION_VARIABLES", "NOISE_BLOCK", "Sensors"]
 
 #: The variables a plant publishes (base names).
-MOTION_VARIABLES = (
+MOTION_VARIABLES = frozenset((
     "$AXIS_ACT", "$AXIS_ACT_MEAS", "$POS_ACT", "$POS_ACT_MES", "$VEL_AXIS_ACT",
     "$TORQUE_AXIS_ACT", "$VEL_ACT",
-)  # fmt: skip
+))  # fmt: skip
 #: Cycles of sensor noise drawn at once.
 NOISE_BLOCK = 256
 _ZEROS = [0.0] * 6  # E1..E6 of the per-axis arrays
