@@ -205,11 +205,16 @@ class EmuProcess:
     The options are those of ``kukavarproxy-emu`` (the harness builds the same EmulatorConfig).
     """
 
-    def __init__(self, *args: str) -> None:
+    def __init__(self, *args: str, robots: int = 1) -> None:
         self.args = ["--port", "0", "--idle-timeout", "0", "--max-clients", "0", *args]
+        if robots != 1:
+            self.args += ["--robots", str(robots)]
+        self.robots = robots
         self.proc: subprocess.Popen[str] | None = None
         self.host = "127.0.0.1"
         self.port = 0
+        #: Every robot's port (a cell: ``--robots N``).
+        self.ports: list[int] = []
 
     def __enter__(self) -> EmuProcess:
         self.proc = subprocess.Popen(
@@ -220,12 +225,14 @@ class EmuProcess:
             cwd=ROOT,
         )
         assert self.proc.stdout is not None
-        line = self.proc.stdout.readline().strip()
-        if not line.startswith("listening on "):
-            self.proc.kill()
-            raise RuntimeError(f"emulator did not start: {line!r}")
-        host, _, port = line.removeprefix("listening on ").rpartition(":")
-        self.host, self.port = host, int(port)
+        for _ in range(self.robots):
+            line = self.proc.stdout.readline().strip()
+            if not line.startswith("listening on "):
+                self.proc.kill()
+                raise RuntimeError(f"emulator did not start: {line!r}")
+            host, _, port = line.removeprefix("listening on ").rpartition(":")
+            self.ports.append(int(port))
+        self.host, self.port = host, self.ports[0]
         return self
 
     @property

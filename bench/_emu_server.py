@@ -1,10 +1,10 @@
 """The emulator as the benchmarks run it: ``kukavarproxy-emu`` plus a control channel on stdin.
 
-Takes the options of ``kukavarproxy-emu`` (same parser, same :class:`EmulatorConfig`), prints
-``listening on HOST:PORT`` and then answers one JSON line per command read from stdin:
+Takes the options of ``kukavarproxy-emu`` (same parser, same :class:`EmulatorConfig`; with
+``--robots N`` a cell), prints ``listening on HOST:PORT`` (one line per robot) and then answers one JSON line per command read from stdin:
 
 * ``stats`` — requests served, clients connected, RSS, CPU seconds and the IPO jitter
-  (p50/p99/max/mean in ms, from ``emu.robot.jitter()``; null without a robot);
+  (p50/p99/max/mean in ms over every robot's recorded ticks; null without a robot);
 * ``reset`` — clear the jitter record (call it once the load is running).
 
 EOF on stdin stops it. Not a public tool: the benchmark scripts start it via
@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from kukavarproxy_emu import Emulator
+from kukavarproxy_emu import Cell, Emulator, cell_configs
 from kukavarproxy_emu.__main__ import build_parser, config_from_args
 
 
@@ -33,43 +33,57 @@ def _rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3
 
 
-def _stats(emu: Emulator) -> dict[str, Any]:
+def _jitter(emulators: list[Emulator]) -> dict[str, Any] | None:
+    """Tick lateness over every robot of the process (a cell: all their ticks together)."""
+    robots = [emu.robot for emu in emulators if emu.robot is not None]
+    if not robots:
+        return None
+    data = sorted(x for robot in robots for x in robot.clock.jitter)
+    n = len(data)
+    if not n:
+        return {"count": 0, "p50_ms": 0.0, "p99_ms": 0.0, "max_ms": 0.0, "mean_ms": 0.0,
+                "overruns": 0, "held": 0}  # fmt: skip
+    return {
+        "count": n,
+        "p50_ms": data[n // 2] * 1e3,
+        "p99_ms": data[min(n - 1, int(n * 0.99))] * 1e3,
+        "max_ms": data[-1] * 1e3,
+        "mean_ms": sum(data) / n * 1e3,
+        "overruns": sum(robot.clock.overruns for robot in robots),
+        "held": sum(robot.clock.held for robot in robots),
+    }
+
+
+def _stats(emulators: list[Emulator]) -> dict[str, Any]:
     usage = os.times()
-    out: dict[str, Any] = {
-        "requests": emu.stats.requests,
-        "clients": emu.stats.clients,
+    return {
+        "requests": sum(emu.stats.requests for emu in emulators),
+        "clients": sum(emu.stats.clients for emu in emulators),
         "rss_mb": _rss_mb(),
         "cpu_s": usage.user + usage.system,
-        "jitter": None,
+        "jitter": _jitter(emulators),
     }
-    if emu.robot is not None:
-        j = emu.robot.jitter()
-        out["jitter"] = {
-            "count": j.count,
-            "p50_ms": j.p50 * 1e3,
-            "p99_ms": j.p99 * 1e3,
-            "max_ms": j.max * 1e3,
-            "mean_ms": j.mean * 1e3,
-            "overruns": emu.robot.clock.overruns,
-        }
-    return out
 
 
 async def _serve(argv: list[str]) -> None:
-    config = config_from_args(build_parser().parse_args(argv))
+    args = build_parser().parse_args(argv)
+    config = config_from_args(args)
     loop = asyncio.get_running_loop()
-    async with Emulator(config) as emu:
+    async with Cell(cell_configs(config, args.robots)) as cell:
         gc.freeze()  # as kukavarproxy-emu does: the start-up heap is never scanned again
-        print(f"listening on {emu.host}:{emu.port}", flush=True)
+        for emu in cell.emulators:
+            print(f"listening on {emu.host}:{emu.port}", flush=True)
         while True:
             # a thread blocks on stdin, so the loop (and the IPO clock) never waits for it
             line = await loop.run_in_executor(None, sys.stdin.readline)
             command = line.strip()
             if not line or command == "quit":
                 return
-            if command == "reset" and emu.robot is not None:
-                emu.robot.clock.reset_stats()
-            print(json.dumps(_stats(emu)), flush=True)
+            if command == "reset":
+                for emu in cell.emulators:
+                    if emu.robot is not None:
+                        emu.robot.clock.reset_stats()
+            print(json.dumps(_stats(cell.emulators)), flush=True)
 
 
 def main() -> None:

@@ -34,6 +34,7 @@ import asyncio
 import heapq
 import itertools
 import logging
+import math
 import time
 import weakref
 from collections import deque
@@ -46,6 +47,12 @@ log = logging.getLogger(__name__)
 
 #: Seconds of wall time the clock may lag before it drops ticks instead of catching up.
 MAX_BEHIND = 0.5
+#: A timer callback also runs the ticks due within this many seconds ...
+EARLY = 0.004
+#: ... as long as it has run for less than this (s).
+BURST = 0.0005
+#: Seconds between two "clock behind" warnings of one process.
+WARN_EVERY = 10.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -121,9 +128,28 @@ class _Wheel:
                 clock._wake = clock._deadline + clock.max_hold
                 self.held.add(clock)
             heapq.heappush(heap, (clock._wake, next(self._seq), clock))
+        self._early(now)
         # a clock still behind is due again at once: call_at(past) runs in the next loop
         # iteration, after the I/O that is ready (requests are answered between late ticks)
         self._arm()
+
+    def _early(self, now: float) -> None:
+        """Run ticks due within ``EARLY`` seconds now, while this callback has taken less than
+        ``BURST``: a cell of robots at rest then wakes the process once per period instead of
+        once per phase (a wake-up costs more than a tick at rest), and a cell of moving robots,
+        whose ticks are expensive, still spreads its work over the phases."""
+        heap, loop = self._heap, self.loop
+        while heap and heap[0][0] <= now + EARLY and loop.time() - now < BURST:
+            wake, _, clock = heap[0]
+            if not clock._running or wake != clock._wake:
+                heapq.heappop(heap)
+                continue
+            if clock.gate is not None or wake != clock._deadline:
+                return  # a gated (or held) clock ticks at its deadline, not before
+            heapq.heappop(heap)
+            clock._tick(max(loop.time(), clock._deadline))
+            clock._wake = clock._deadline
+            heapq.heappush(heap, (clock._wake, next(self._seq), clock))
 
     def release(self) -> None:
         """Run the held ticks now: a request was just booked, so its reply is a service time
@@ -143,6 +169,19 @@ def _wheel(loop: asyncio.AbstractEventLoop) -> _Wheel:
     if wheel is None:
         wheel = _WHEELS[loop] = _Wheel(loop)
     return wheel
+
+
+_last_warning = -math.inf
+
+
+def _warn_behind(late: float) -> None:
+    """One warning per ``WARN_EVERY`` seconds for the whole process: a saturated cell of fifty
+    robots would otherwise log fifty lines every half second."""
+    global _last_warning
+    now = time.monotonic()
+    if now - _last_warning >= WARN_EVERY:
+        _last_warning = now
+        log.warning("IPO clock %.0f ms behind; skipping ticks (the machine is too busy)", late * 1e3)
 
 
 def release(loop: asyncio.AbstractEventLoop | None = None) -> None:
@@ -249,7 +288,7 @@ class IpoClock:
         late = now - self._deadline
         if late > MAX_BEHIND:
             self.overruns += 1
-            log.warning("IPO clock %.0f ms behind; skipping ticks", late * 1e3)
+            _warn_behind(late)
             self._start, self._n = now, 0
         self.jitter.append(max(late, 0.0))
         if self._holding:

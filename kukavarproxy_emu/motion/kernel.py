@@ -28,7 +28,7 @@ import math
 import time
 from collections import deque
 from collections.abc import Callable, Generator, Sequence
-from typing import TypeVar
+from typing import TypeVar, cast
 
 import numpy as np
 
@@ -168,6 +168,7 @@ class MotionKernel(Publisher):
         self.active: list[Segment] = []  # running; two while blending
         self.pending: deque[Segment] = deque()  # planned by the advance run, not started
         self.planned_q = q0.copy()  # end of the last planned motion (base of *_REL)
+        self._cache: dict[tuple[str, str], tuple[object, object]] = {}
         # the q and planned_q objects of a cycle that found the robot still (see tick)
         self._still_q: FloatArray | None = None
         self._still_planned: FloatArray | None = None
@@ -205,7 +206,24 @@ class MotionKernel(Publisher):
         return ahead < max(advance, 0)
 
     # --- planning (called by programs) -----------------------------------------------------
+    def _cached(self, names: tuple[str, str], build: Callable[[], T]) -> T:
+        """``build()`` of the variables ``names``, built again only when one of them changed
+        (a follower plans a motion every cycle; these arrays change once in a while)."""
+        key = (names, self.store.version(names[0]), self.store.version(names[1]))
+        hit = self._cache.get(names)
+        if hit is not None and hit[0] == key:
+            return cast("T", hit[1])
+        value = build()
+        for arr in value if isinstance(value, tuple) else ():
+            if isinstance(arr, np.ndarray):
+                arr.setflags(write=False)  # shared between plans: nobody may change it
+        self._cache[names] = (key, value)
+        return value
+
     def _limits(self) -> tuple[FloatArray, FloatArray]:
+        return self._cached(("$VEL_AXIS", "$ACC_AXIS"), self._read_limits)
+
+    def _read_limits(self) -> tuple[FloatArray, FloatArray]:
         vel = self._percent("$VEL_AXIS")
         acc = self._percent("$ACC_AXIS")
         return self.model.max_speed * vel, self.model.max_accel * acc
@@ -217,6 +235,9 @@ class MotionKernel(Publisher):
         return np.array([max(float(v), 1.0) for v in values[:6]]) / 100.0  # type: ignore[arg-type]
 
     def _soft_limits(self) -> tuple[FloatArray, FloatArray]:
+        return self._cached(("$SOFTN_END", "$SOFTP_END"), self._read_soft_limits)
+
+    def _read_soft_limits(self) -> tuple[FloatArray, FloatArray]:
         lo, hi = self.store.get("$SOFTN_END"), self.store.get("$SOFTP_END")
         assert isinstance(lo, list) and isinstance(hi, list)
         return np.array(lo[:6], dtype=np.float64), np.array(hi[:6], dtype=np.float64)
