@@ -4,8 +4,9 @@ Takes the options of ``kukavarproxy-emu`` (same parser, same :class:`EmulatorCon
 ``--robots N`` a cell), prints ``listening on HOST:PORT`` (one line per robot) and then answers one JSON line per command read from stdin:
 
 * ``stats`` — requests served, clients connected, RSS, CPU seconds and the IPO jitter
-  (p50/p99/max/mean in ms over every robot's recorded ticks; null without a robot);
-* ``reset`` — clear the jitter record (call it once the load is running).
+  (p50/p99/max/mean in ms over every robot's recorded ticks; null without a robot) and, with a
+  latency profile, how late replies were computed after their deadlines;
+* ``reset`` — clear the jitter and reply-lateness records (call it once the load is running).
 
 EOF on stdin stops it. Not a public tool: the benchmark scripts start it via
 :class:`bench._common.EmuProcess`.
@@ -54,6 +55,21 @@ def _jitter(emulators: list[Emulator]) -> dict[str, Any] | None:
     }
 
 
+def _reply_lateness(emulators: list[Emulator]) -> dict[str, float] | None:
+    """How late replies were computed after their latency deadlines (ms), all emulators."""
+    data = sorted(x for emu in emulators if emu.service is not None for x in emu.service.late)
+    if not data:
+        return None
+    n = len(data)
+    return {
+        "count": n,
+        "p50_ms": data[n // 2] * 1e3,
+        "p90_ms": data[int(n * 0.9)] * 1e3,
+        "p99_ms": data[min(n - 1, int(n * 0.99))] * 1e3,
+        "mean_ms": sum(data) / n * 1e3,
+    }
+
+
 def _stats(emulators: list[Emulator]) -> dict[str, Any]:
     usage = os.times()
     return {
@@ -62,6 +78,7 @@ def _stats(emulators: list[Emulator]) -> dict[str, Any]:
         "rss_mb": _rss_mb(),
         "cpu_s": usage.user + usage.system,
         "jitter": _jitter(emulators),
+        "reply_late": _reply_lateness(emulators),
     }
 
 
@@ -83,6 +100,8 @@ async def _serve(argv: list[str]) -> None:
                 for emu in cell.emulators:
                     if emu.robot is not None:
                         emu.robot.clock.reset_stats()
+                    if emu.service is not None:
+                        emu.service.late.clear()
             print(json.dumps(_stats(cell.emulators)), flush=True)
 
 

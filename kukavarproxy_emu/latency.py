@@ -285,6 +285,9 @@ class ServiceQueue:
         #: When the last reply was computed (time.monotonic()).
         self.last_reply = -math.inf
         self._loop: asyncio.AbstractEventLoop | None = None
+        #: How late each recent reply was computed after its deadline (s; the benchmarks'
+        #: view of what delays replies: a busy loop, a slow read).
+        self.late: deque[float] = deque(maxlen=10_000)
 
     async def run(self, kind: Kind, compute: Callable[[], T], weight: int = 1) -> T:
         """Answer with ``compute()`` after ``weight`` sampled service times of ``kind``.
@@ -302,10 +305,12 @@ class ServiceQueue:
             await TIMER.wait_until(deadline)
         finally:
             self.pending.remove(deadline)
-        self.scheduler.answered(deadline, time.monotonic())
+        woke = time.monotonic()
+        self.scheduler.answered(deadline, woke)
         self.served += 1
         reply = compute()
         self.last_reply = time.monotonic()
+        self.late.append(self.last_reply - deadline)
         return reply
 
 

@@ -48,6 +48,9 @@ log = logging.getLogger(__name__)
 
 #: Cached read texts per variable before its cache starts afresh (bounds memory, not speed).
 TEXT_CACHE_PATHS = 4096
+#: Names :meth:`VariableStore.warm` formats ahead at most (a client polling a few variables
+#: every cycle; more names than this are simply formatted when they are read).
+HOT_NAMES = 32
 #: Elements of the largest array a whole-array read can answer: 2 bytes each at least (one
 #: character and a blank as text, one word in mode 2) under the 65 529-byte reply value.
 WHOLE_ARRAY_LIMIT = 32_764
@@ -129,6 +132,9 @@ class VariableStore:
         #: only unchanged variables and wrote nothing would do exactly the same again.
         self.mutations = 0
         self._versions: dict[str, int] = {}
+        # names read since the last warm() and in the cycle before it (see warm)
+        self._hot: dict[str, None] = {}
+        self._hot_before: dict[str, None] = {}
         if system:
             for sv in system_variables(overrides):
                 self.declare(sv.name, sv.type_name, sv.dims, sv.init, sv.read_only, sv.value_range)
@@ -248,6 +254,29 @@ class VariableStore:
     # --- text interface (the server) ---------------------------------------------------------
     def read(self, name: str) -> str:
         """The KRC4 text of ``name``; raises :class:`UnknownVariable` (KVP: empty + success)."""
+        hot = self._hot
+        if len(hot) < HOT_NAMES:
+            hot[name] = None
+        return self._read(name)
+
+    def warm(self) -> None:
+        """Format now the texts a client will ask for: the names read during each of the last
+        two cycles (a client polling every cycle), after the robot's tick changed them.
+
+        The simulated robot calls it at the end of its tick, which runs where it delays no
+        reply (:func:`kukavarproxy_emu.latency.tick_gate`): the reply then only looks its text
+        up. A name read less often than every cycle is not formatted ahead (the text would be
+        stale again before it is read).
+        """
+        again = self._hot.keys() & self._hot_before.keys()
+        self._hot_before, self._hot = self._hot, {}
+        for name in again:
+            try:
+                self._read(name)
+            except UnknownVariable:
+                pass
+
+    def _read(self, name: str) -> str:
         path = parse_name(name)
         if path is None:
             raise UnknownVariable(name)

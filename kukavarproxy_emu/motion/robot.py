@@ -132,6 +132,8 @@ class Robot:
         if self.sps is not None:
             self.sps.step()
         self.kernel.tick()
+        # the texts clients poll every cycle, formatted here rather than in their replies
+        self.store.warm()
 
     # --- errors ------------------------------------------------------------------------------
     def fault(self, message: str) -> None:
