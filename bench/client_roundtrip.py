@@ -280,7 +280,7 @@ def run(quick: bool, repeat: int) -> tuple[list[Row], dict[str, Any]]:
             cycles.append(asyncio.run(_control_cycle(emu.port, cycle_seconds)))
         # the same cycle with the simulated robot following MYAXIS (the default emulator)
         with EmuProcess("--latency", "kvp", "--seed", str(SEED + i)) as emu:
-            cycles_robot.append(asyncio.run(_control_cycle(emu.port, cycle_seconds / 2)))
+            cycles_robot.append(asyncio.run(_control_cycle(emu.port, cycle_seconds)))
     rows.append(
         Row(
             "`read_joint_torques()` vs six sequential element reads (kvp)",
@@ -315,8 +315,13 @@ def run(quick: bool, repeat: int) -> tuple[list[Row], dict[str, Any]]:
             "cycles/s",
             peer=limit,
             peer_name="limit",
+            target=("ratio", ">=", 0.95),
             runs=cycles_robot,
-            note="informative: the motion kernel shares the emulator's event loop",
+            note=(
+                "issue 11: the robot's tick runs in the shadow of booked replies and formats"
+                " the polled texts; same cycle without the robot:"
+                f" {median(cycles) / limit:.3f} of the limit in this run"
+            ),
         )
     )
     extra["seeds"] = [SEED + i for i in range(repeat)]

@@ -17,6 +17,7 @@ from dataclasses import replace
 import pytest
 
 from kukavarproxy_emu import Cell, EmulatorConfig, cell_configs
+from kukavarproxy_emu.__main__ import main as emu_main
 from kukavarproxy_emu.krl.executor import parse_text
 from kukavarproxy_emu.latency import LatencyProfile, ServiceQueue, tick_gate
 from kukavarproxy_emu.motion import IpoClock, Robot
@@ -74,11 +75,9 @@ def test_command_line_prints_one_line_per_robot() -> None:
         proc.terminate()
         proc.wait(10)
     assert proc.returncode == 0
-    bad = subprocess.run(
-        [sys.executable, "-m", "kukavarproxy_emu", "--robots", "0"],
-        capture_output=True, text=True, timeout=30, check=False,
-    )  # fmt: skip
-    assert bad.returncode == 2 and "robots" in bad.stderr
+    with pytest.raises(SystemExit) as usage:
+        emu_main(["--robots", "0"])
+    assert usage.value.code == 2
 
 
 def test_krl_cycles_are_skipped_only_while_they_would_repeat() -> None:
