@@ -42,7 +42,7 @@ def _header(snapshot: Snapshot) -> list[str]:
 
 def dat_text(snapshot: Snapshot) -> str:
     """The data list of ``snapshot``: types, globals and a comment line per copied variable."""
-    from .snapshot import struc_line
+    from .snapshot_layout import struc_line
 
     name = snapshot.name
     lines = [

@@ -43,7 +43,8 @@ from pyopenshowvar.krl import KrlValue
 
 from . import ast
 from .interp_expr import ExprMixin
-from .interp_motion import AT_ONCE, BUDGET, PASS, WAIT, MotionMixin
+from .interp_motion import BUDGET, WAIT, MotionMixin
+from .interp_skip import PASS, SkipMixin
 from .runtime import (
     ACTUAL_POSITION,
     HEAVY_ELEMENTS,
@@ -98,7 +99,7 @@ class Halted(Exception):
     """``HALT`` reached (the main run got there): the program stops, no error message."""
 
 
-class Interpreter(ExprMixin, MotionMixin):
+class Interpreter(SkipMixin, ExprMixin, MotionMixin):
     """Executes one module's main routine, stepped once per IPO cycle."""
 
     def __init__(
@@ -132,14 +133,7 @@ class Interpreter(ExprMixin, MotionMixin):
         self.sim_time = 0.0
         self._gen: Gen | None = None
         self._reads: dict[int, bool] = {}
-        #: The variables (and their versions) the last cycle read, when it ran from a repeating
-        #: point to the same point and changed nothing (see _cycle); None otherwise.
-        self._quiet: list[tuple[VariableStore, str, int]] | None = None
-        self._at_pass: int | None = None  # the LOOP whose boundary the last cycle ended at
-        self._pass_loop: int | None = None
-        self._quiet_idle: bytes | None = None
-        #: Passes skipped because they would have done exactly what the previous one did.
-        self.skipped = 0
+        self._init_skip()
         self._user_calls: dict[int, bool] = {}
         self._local_sizes: dict[int, int] = {}
         #: Elements of the locals of the routines on the call stack now.
@@ -151,7 +145,7 @@ class Interpreter(ExprMixin, MotionMixin):
         self.frames.clear()
         self.local_elements = 0
         self.finished = self.halted = False
-        self._quiet = self._at_pass = None
+        self._reset_skip()
         self._gen = self._main()
 
     def step(self) -> None:
@@ -159,58 +153,6 @@ class Interpreter(ExprMixin, MotionMixin):
         if self._gen is None or self.finished or self.halted:
             return
         self._cycle()
-
-    def _idle_at(self) -> bytes | None:
-        """The robot interpreter's kernel state a repeated cycle depends on: the planned end
-        point while nothing moves or waits (None while something does)."""
-        kernel = self.kernel
-        if kernel is None:
-            return b""
-        if kernel.moving or kernel.queued:
-            return None
-        return bytes(kernel.planned_q.tobytes())
-
-    def _cycle(self) -> None:
-        """One cycle, skipped when it would repeat the previous one exactly.
-
-        A cycle that ran from a repeating point to the same point — the end of the submit
-        interpreter's LOOP body, or a robot program's motion that completed at once (``LOOP PTP
-        MYAXIS C_PTP ENDLOOP`` with the robot on MYAXIS) — and wrote nothing (every assignment
-        found its target equal) depends only on what it read and, for the robot interpreter,
-        on the kernel standing still at the same planned point. While none of those variables
-        changed, the next cycle would read the same values and again write nothing. A default
-        robot at rest (follow + sps.sub) then costs nothing here until something changes,
-        which a cell of robots needs.
-        """
-        quiet = self._quiet
-        if quiet is not None:
-            if self._idle_at() == self._quiet_idle and all(
-                store.version(base) == version for store, base, version in quiet
-            ):
-                self.skipped += 1
-                return
-            self._quiet = None
-        start = self._at_pass
-        idle = self._idle_at()
-        stores = [self.store, *(f.store for f in self.frames)]
-        before = [st.mutations for st in stores]
-        reads: set[tuple[VariableStore, str]] = set()
-        self.ev.reads = reads
-        try:
-            reason = self._run()
-        finally:
-            self.ev.reads = None
-        self._at_pass = self._pass_loop if reason in (PASS, AT_ONCE) else None
-        if (
-            start is not None
-            and start == self._at_pass
-            and idle is not None
-            and idle == self._idle_at()
-            and len(self.frames) + 1 == len(stores)
-            and [st.mutations for st in stores] == before
-        ):
-            self._quiet = [(st, base, st.version(base)) for st, base in reads]
-            self._quiet_idle = idle
 
     def _run(self) -> str | None:
         self.count = self.at_once = 0
