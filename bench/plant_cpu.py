@@ -84,7 +84,8 @@ async def main_async(seconds: float) -> list[Row]:
                         pct,
                         "%",
                         target=("ours", "<=", TARGETS[state]),
-                        note="issue 11 target (per robot, 50 in one process)"
+                        note="issue 11 target, here with this process' whole 12 ms wake-up floor"
+                        " (first row); per robot in a cell: bench/cell_cpu.py"
                         if plant == "dynamic" and not reader
                         else "",
                     )
