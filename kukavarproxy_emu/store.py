@@ -126,8 +126,8 @@ class VariableStore:
         self._text: dict[str, dict[VarPath, str]] = {}
         self._system: set[str] = set()
         # lazy values (see defer): the stale base names and the callback that fills them
-        self._stale: frozenset[str] = frozenset()
-        self._fill: Callable[[], None] | None = None
+        # stale base name -> (its group, the fill that sets the whole group)
+        self._stale: dict[str, tuple[frozenset[str], Callable[[], None]]] = {}
         #: Changes of any variable so far, and per variable (base name): a KRL pass that read
         #: only unchanged variables and wrote nothing would do exactly the same again.
         self.mutations = 0
@@ -280,8 +280,8 @@ class VariableStore:
         path = parse_name(name)
         if path is None:
             raise UnknownVariable(name)
-        if self._fill is not None and path.base in self._stale:
-            self._refresh()
+        if self._stale and path.base in self._stale:
+            self._refresh(path.base)
         cache = self._text.get(path.base)
         if cache is not None:
             text = cache.get(path)
@@ -401,8 +401,8 @@ class VariableStore:
         path = parse_name(name)
         if path is None:
             raise UnknownVariable(name)
-        if self._fill is not None and path.base in self._stale:
-            self._refresh()
+        if self._stale and path.base in self._stale:
+            self._refresh(path.base)
         var = self._vars.get(path.base)
         if var is not None and var.is_array and path.index is None and not path.members:
             path = VarPath(path.base, (), ())
@@ -459,21 +459,36 @@ class VariableStore:
         them calls ``fill()`` once, which sets them (e.g. with :meth:`set_system`).
 
         The simulated robot computes its published readings this way only when someone
-        looks: a robot nobody reads costs no formatting. A later ``defer`` replaces an
-        earlier one that was never filled.
+        looks: a robot nobody reads costs no formatting. The names form a group filled
+        together; several groups may be stale at once (a reader of ``$AXIS_ACT`` does not pay
+        for the forward kinematics of ``$POS_ACT``). Deferring a name again replaces the
+        earlier, unfilled group it was in.
         """
         # a frozenset is taken as it is (the robot defers the same names every cycle)
-        self._stale = names if isinstance(names, frozenset) else frozenset(
+        group = names if isinstance(names, frozenset) else frozenset(
             n.strip().upper() for n in names
         )
-        self._fill = fill
-        for name in self._stale:  # their values change when they are filled
-            self._bump(name)
+        entry = (group, fill)
+        stale = self._stale
+        for name in group:
+            stale[name] = entry
+            self._bump(name)  # its value changes when it is filled
 
-    def _refresh(self) -> None:
-        fill, self._fill = self._fill, None
-        if fill is not None:
+    def _refresh(self, base: str | None = None) -> None:
+        """Fill the group of ``base`` (None: every stale group)."""
+        stale = self._stale
+        while stale:
+            key = base if base is not None else next(iter(stale))
+            entry = stale.get(key)
+            if entry is None:
+                return
+            group, fill = entry
+            for name in group:
+                if stale.get(name) is entry:
+                    del stale[name]
             fill()
+            if base is not None:
+                return
 
     def names(self) -> list[str]:
         """All variable names, sorted (arrays without brackets), for tab completion."""

@@ -1,10 +1,10 @@
 """The controller's sensors on the dynamic plant: what a KRC4 measures and publishes.
 
 :class:`Sensors` is mixed into :class:`~.dynamic.DynamicPlant` (state lives there). Each IPO
-cycle the plant marks the motion variables stale (:meth:`VariableStore.defer`); the first
-read of any of them calls :meth:`Sensors.publish`, which writes all of them from this cycle's
-state: encoder axes with seeded noise, the nominal forward kinematics the controller computes
-from them, axis speeds, motor torques with seeded noise and the TCP speed. See
+cycle the plant marks the motion variables stale (:meth:`VariableStore.defer`), in groups;
+the first read of a variable fills its group from this cycle's state: encoder axes with seeded
+noise; the nominal forward kinematics the controller computes from them; axis speeds and motor
+torques with seeded noise; the TCP speed (:meth:`Sensors.publish` writes all). See
 docs/emulator-robot.md ("Which variable is what").
 """
 
@@ -30,6 +30,12 @@ MOTION_VARIABLES = frozenset((
     "$AXIS_ACT", "$AXIS_ACT_MEAS", "$POS_ACT", "$POS_ACT_MES", "$VEL_AXIS_ACT",
     "$TORQUE_AXIS_ACT", "$VEL_ACT",
 ))  # fmt: skip
+#: The groups filled together when one of their variables is read: a reader of $AXIS_ACT
+#: does not pay for the forward kinematics, the torques or the TCP speed.
+_AXES = frozenset(("$AXIS_ACT", "$AXIS_ACT_MEAS"))
+_POSES = frozenset(("$POS_ACT", "$POS_ACT_MES"))
+_DRIVES = frozenset(("$VEL_AXIS_ACT", "$TORQUE_AXIS_ACT"))
+_SPEED = frozenset(("$VEL_ACT",))
 #: Cycles of sensor noise drawn at once.
 NOISE_BLOCK = 256
 _ZEROS = [0.0] * 6  # E1..E6 of the per-axis arrays
@@ -64,12 +70,26 @@ class Sensors:
         # one pose per cycle: plain-float FK (numpy's per-call overhead is most of a 4x4 chain)
         self._fk = SinglePoseFK(self.model)
         self._fk_frames: tuple[object, object] = (None, None)
+        self._measured_at = -1
+        self._measured: tuple[FloatArray, FloatArray, FloatArray, list[float]]
 
     def _read_frame(self, name: str) -> FloatArray:
         raise NotImplementedError  # provided by the plant
 
     def _defer(self) -> None:
-        self.store.defer(MOTION_VARIABLES, self.publish)
+        store = self.store
+        store.defer(_AXES, self._publish_axes)
+        store.defer(_POSES, self._publish_poses)
+        store.defer(_DRIVES, self._publish_drives)
+        store.defer(_SPEED, self._publish_speed)
+
+    def _readings(self) -> tuple[FloatArray, FloatArray, FloatArray, list[float]]:
+        """This cycle's :meth:`measure` (and the axes as floats), computed once per cycle."""
+        if self._measured_at != self.ticks:
+            q, qd, tau = self.measure()
+            self._measured = (q, qd, tau, q.tolist())
+            self._measured_at = self.ticks
+        return self._measured
 
     def measure(self) -> tuple[FloatArray, FloatArray, FloatArray]:
         """This cycle's sensor readings: axes (deg), axis speeds (deg/s), torques (Nm)."""
@@ -112,18 +132,24 @@ class Sensors:
         return self._st
 
     def publish(self) -> None:
-        """Write this cycle's readings into the store (called by the store on the first read).
+        """Write all of this cycle's readings into the store (the store calls the groups'
+        parts below on the first read of one of their variables)."""
+        self._publish_axes()
+        self._publish_poses()
+        self._publish_drives()
+        self._publish_speed()
 
-        The values are built directly (floats in canonical member order) and swapped in as
-        trusted: a robot read every cycle pays this once per cycle, and the store formats
-        each variable's text only when it is read.
-        """
-        q, qd, tau = self.measure()
-        store = self.store
-        qs = q.tolist()
+    # The values are built directly (floats in canonical member order) and swapped in as
+    # trusted: a robot read every cycle pays this once per cycle, and the store formats each
+    # variable's text only when it is read.
+    def _publish_axes(self) -> None:
+        qs = self._readings()[3]
         axes = E6Axis._new("E6AXIS", dict(zip(_AXIS_KEYS, qs + _ZEROS, strict=True)))
-        store.set_system("$AXIS_ACT", axes, trusted=True)
-        store.set_system("$AXIS_ACT_MEAS", axes, trusted=True)
+        self.store.set_system("$AXIS_ACT", axes, trusted=True)
+        self.store.set_system("$AXIS_ACT_MEAS", axes, trusted=True)
+
+    def _publish_poses(self) -> None:
+        qs = self._readings()[3]
         s, t = self._status_turn()
         base = self._base_matrix()
         if self._fk_frames[0] is not self._tool or self._fk_frames[1] is not base:
@@ -133,13 +159,18 @@ class Sensors:
         pose["S"], pose["T"] = s, t
         pose.update(zip(E6Pos.EXTERNAL, _ZEROS, strict=True))
         pos = E6Pos._new("E6POS", pose)  # type: ignore[arg-type]
-        store.set_system("$POS_ACT", pos, trusted=True)
-        store.set_system("$POS_ACT_MES", pos, trusted=True)
+        self.store.set_system("$POS_ACT", pos, trusted=True)
+        self.store.set_system("$POS_ACT_MES", pos, trusted=True)
+
+    def _publish_drives(self) -> None:
+        _, qd, tau, _ = self._readings()
         speed = (qd / self.model.max_speed * 100.0).tolist()
-        store.set_system("$VEL_AXIS_ACT", speed + _ZEROS, trusted=True)
-        store.set_system("$TORQUE_AXIS_ACT", tau.tolist() + _ZEROS, trusted=True)
+        self.store.set_system("$VEL_AXIS_ACT", speed + _ZEROS, trusted=True)
+        self.store.set_system("$TORQUE_AXIS_ACT", tau.tolist() + _ZEROS, trusted=True)
+
+    def _publish_speed(self) -> None:
         v = np.zeros(6)
         mujoco.mj_objectVelocity(
             self._mj, self._data, mujoco.mjtObj.mjOBJ_SITE, self._tcp_site, v, 0
         )
-        store.set_system("$VEL_ACT", float(np.linalg.norm(v[3:])), trusted=True)
+        self.store.set_system("$VEL_ACT", float(np.linalg.norm(v[3:])), trusted=True)

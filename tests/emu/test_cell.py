@@ -139,13 +139,13 @@ def test_texts_polled_every_cycle_are_formatted_in_the_tick() -> None:
     robot = Robot(store, program="none", sps=None, plant="dynamic", seed=5)
     robot.tick()
     fills: list[int] = []
-    publish = robot.plant.publish  # type: ignore[union-attr]
+    publish_axes = robot.plant._publish_axes  # type: ignore[union-attr]
 
     def counting_publish() -> None:
         fills.append(robot.kernel.ticks)
-        publish()
+        publish_axes()
 
-    robot.plant.publish = counting_publish  # type: ignore[union-attr,method-assign]
+    robot.plant._publish_axes = counting_publish  # type: ignore[union-attr,method-assign]
     robot.tick()  # the plant defers to the counting fill from now on
     in_read, in_tick = [], []
     for _ in range(4):  # a client polls $AXIS_ACT every cycle
@@ -158,3 +158,5 @@ def test_texts_polled_every_cycle_are_formatted_in_the_tick() -> None:
     # once it is polled in two cycles in a row, the tick formats it and the read looks it up
     assert in_read[:2] == [1, 1] and in_read[2:] == [0, 0]
     assert in_tick[0] == 0 and in_tick[1:] == [1, 1, 1]
+    # and only its own group: the pose (forward kinematics) waits until someone reads it
+    assert "$POS_ACT" in store._stale and "$AXIS_ACT" not in store._stale
