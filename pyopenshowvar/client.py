@@ -181,7 +181,9 @@ class Client(C3Methods, RobotHelpers, ClientCore):
         of the whole batch still raises.
         """
         names = list(names)
-        replies = await self._request_many([(n, encode_read(0, n)) for n in names], timeout)
+        frames = self._read_frames  # a poller asks for the same names again and again
+        items = [(n, frames.get(n) or self._read_frame(n)) for n in names]
+        replies = await self._request_many(items, timeout)
         return self._read_results(names, replies, typed)
 
     async def write_many(

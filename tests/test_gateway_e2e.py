@@ -208,6 +208,10 @@ async def test_dropped_robot_goes_bad_and_comes_back_good(cell: Cell) -> None:
         )
         connected = client.get_node(node_id(ours, "Controllers.r3.ParameterSet.Connected"))
         await wait_for(lambda: _is_good(a2))
+        # a subscriber is told of the drop and the return too, not only a client that reads
+        statuses = _Statuses()
+        sub = await client.create_subscription(50, statuses)
+        await sub.subscribe_data_change([a2], queuesize=50)
         port = cell.emus["r3"].port
         await cell.emus["r3"].close()
 
@@ -222,6 +226,27 @@ async def test_dropped_robot_goes_bad_and_comes_back_good(cell: Cell) -> None:
         await wait_for(lambda: _is_good(a2))
         assert await a2.read_value() == pytest.approx(-90.0)
         assert await connected.read_value() is True
+        await wait_for(lambda: statuses.seen(ua.StatusCodes.Good, after_bad=True))
+        await sub.delete()
+        assert statuses.codes[0] == ua.StatusCodes.Good  # the value when it subscribed
+        assert ua.StatusCodes.BadNoCommunication in statuses.codes
+        assert all(stamp is not None for stamp in statuses.stamps)
+
+
+class _Statuses:
+    def __init__(self) -> None:
+        self.codes: list[int] = []
+        self.stamps: list[Any] = []
+
+    def datachange_notification(self, node: Any, val: Any, data: Any) -> None:
+        dv = data.monitored_item.Value
+        self.codes.append(dv.StatusCode.value)
+        self.stamps.append(dv.SourceTimestamp)
+
+    async def seen(self, code: int, after_bad: bool) -> bool:
+        bad = ua.StatusCodes.BadNoCommunication
+        later = self.codes[self.codes.index(bad) :] if bad in self.codes else []
+        return code in (later if after_bad else self.codes)
 
 
 async def test_stalled_robot_goes_bad_within_its_timeout_and_others_keep_polling(

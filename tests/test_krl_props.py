@@ -22,6 +22,7 @@ from pyopenshowvar.krl import (
     parse_array,
     parse_value,
 )
+from pyopenshowvar.krl.parse import parse_number_list, parse_number_struct
 
 
 def f32(x: float) -> float:
@@ -186,3 +187,76 @@ def test_e6pos_parse_is_fast() -> None:
         parse_value(text)
     per_call = (time.perf_counter() - start) / n
     assert per_call < 500e-6  # generous for slow CI; typically ~30 µs
+
+
+# --- the fast paths (parse_number_list, parse_number_struct): they agree with parse_value ---
+# wherever they answer, answer for the texts a KRC prints, and fall back (None) on the rest.
+
+_numbers = st.one_of(ints, reals32, st.floats(-1e300, 1e300))
+_blanks = st.sampled_from([" ", "  ", "\t", " \t"])
+
+
+def _number_text(v: int | float, style: int) -> str:
+    if isinstance(v, int):
+        return str(v)
+    if style == 0 and abs(v) <= 3.4e38:  # the KRC4's own format (float32 range)
+        return format_real_krc4(v)
+    return repr(v) if style == 1 else f"{v:.9E}"
+
+
+@given(st.lists(st.tuples(_numbers, st.integers(0, 2)), min_size=1, max_size=14), _blanks)
+def test_number_list_fast_path_agrees_with_parse_value(items: list[Any], sep: str) -> None:
+    text = sep.join(_number_text(v, style) for v, style in items)
+    fast = parse_number_list(text)
+    slow = parse_value(text)
+    assert fast == [float(x) for x in (slow if isinstance(slow, list) else [slow])]
+
+
+@given(
+    st.dictionaries(member_names.map(str.upper), st.tuples(_numbers, st.integers(0, 2)),
+                    min_size=1, max_size=12),
+    st.none() | user_type_names,
+)  # fmt: skip
+def test_number_struct_fast_path_agrees_with_parse_value(
+    members: dict[str, Any], type_name: str | None
+) -> None:
+    body = ", ".join(f"{k} {_number_text(v, style)}" for k, (v, style) in members.items())
+    text = "{" + (f"{type_name}: " if type_name else "") + body + "}"
+    fast = parse_number_struct(text)
+    slow = parse_value(text)
+    assert isinstance(slow, Struct)
+    assert fast == {k: float(v) for k, v in slow.members.items()}
+
+
+@settings(max_examples=300)
+@given(st.lists(_ALPHABET, max_size=60).map("".join))
+def test_fast_paths_answer_only_what_parse_value_accepts(text: str) -> None:
+    for fast in (parse_number_list, parse_number_struct):
+        got = fast(text)
+        if got is not None:  # then parse_value accepts it and means the same numbers
+            slow = parse_value(text)
+            if isinstance(got, dict):
+                assert isinstance(slow, Struct)
+                assert got == {k: float(v) for k, v in slow.members.items()}
+            else:
+                assert got == [float(x) for x in (slow if isinstance(slow, list) else [slow])]
+
+
+def test_fast_paths_fall_back_on_anything_else() -> None:
+    krc4 = (
+        "{E6AXIS: A1 3.13784176E-06, A2 -90.0000381, A3 90.0000229, A4 0.0, A5 -1.3E-05, "
+        "A6 0.0, E1 0.0, E2 0.0, E3 0.0, E4 0.0, E5 0.0, E6 0.0}"
+    )
+    assert parse_number_struct(krc4) == {
+        k.upper(): float(v)
+        for k, v in parse_value(krc4).members.items()  # type: ignore[union-attr]
+    }
+    assert parse_number_list("-0.236844778 -24.7430096 0.0 300") == [
+        -0.236844778, -24.7430096, 0.0, 300.0
+    ]  # fmt: skip
+    for text in ("", " ", "1e999 2", "1" * 400, "1.5x", "1..2", "TRUE", "#P_ACTIVE",
+                 '"text"', "{X 1}", "1 {X 1}", "1,2"):  # fmt: skip
+        assert parse_number_list(text) is None, text
+    for text in ("{}", "{X 1, X 2}", "{X 1e999}", "{X TRUE}", "{X {A 1}}", "{X 1,}", "{X 1",
+                 "{E6POS: X 1.5, S 'B010'}", " {X 1}", "{X: 1}", "1"):  # fmt: skip
+        assert parse_number_struct(text) is None, text

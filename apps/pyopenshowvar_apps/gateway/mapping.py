@@ -150,9 +150,11 @@ def poll_values(
 
     out: dict[str, Any] = {}
     axes = values.get("$AXIS_ACT")
-    if want("$AXIS_ACT") and isinstance(axes, Struct):
+    # a Struct from parse_value, or the members' dict from the fast path (parse_number_struct)
+    members = axes.members if isinstance(axes, Struct) else axes
+    if want("$AXIS_ACT") and isinstance(members, Mapping):
         try:
-            out["position"] = [float(axes.members[a]) for a in _AXES]
+            out["position"] = [float(members[a]) for a in _AXES]
         except (KeyError, TypeError, ValueError):
             pass
     percent_to_speed = [s / 100.0 for s in max_speed]

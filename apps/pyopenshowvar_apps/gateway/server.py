@@ -28,8 +28,9 @@ from asyncua import Server, ua
 from asyncua.common.connection import TransportLimits
 
 from .cell import CellConfig
+from .live import Sink
 from .model import GATEWAY_URI, Instantiator, load_nodesets
-from .poller import RobotPoller, Sink
+from .poller import RobotPoller
 from .robotics import CellNodes, RobotBuilder, RobotNodes, build_cell
 from .security import GatewayUserManager, ensure_certificate
 from .writes import WRITE_METHOD, add_write_method
