@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pyopenshowvar_apps.gateway.cell import CellError, load_cell, parse_cell
 from pyopenshowvar_apps.gateway.mapping import poll_values, task_state
+from pyopenshowvar_apps.gateway.poller import _next_slot
 from pyopenshowvar_apps.gateway.security import (
     GatewayUserManager,
     check_hash_format,
@@ -202,3 +203,19 @@ def test_the_cell_file_in_docs_gateway_md_is_valid() -> None:
     c = parse_cell(tomllib.loads(text))
     assert c.security.enabled and [r.name for r in c.robots] == ["r1", "r2"]
     assert c.robots[0].snapshots[0].variable == "GW_SNAP"
+
+
+@given(
+    st.floats(0.0, 1e7),
+    st.sampled_from([0.02, 0.05, 0.1, 1 / 3, 1.0]),
+    st.sampled_from([0.0, 0.2, 0.4, 0.6, 0.8]),
+)
+def test_poll_slots_are_on_the_grid_and_one_period_apart(
+    now: float, period: float, phase: float
+) -> None:
+    """The poll schedule: the next slot is strictly later, within one period, on the robot's
+    phase of the grid; from a slot the next is exactly one period on (never a double poll)."""
+    slot = _next_slot(now, period, phase)
+    assert now < slot <= now + period * (1 + 1e-6)
+    assert (slot / period - phase) == pytest.approx(round(slot / period - phase), abs=1e-6)
+    assert _next_slot(slot, period, phase) - slot == pytest.approx(period, rel=1e-6)

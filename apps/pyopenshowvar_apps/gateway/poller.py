@@ -12,7 +12,9 @@ round trip. Every value carries the time the reply arrived as its SourceTimestam
 A robot that drops (connection lost, timeout, refused connection) turns all its live nodes
 Bad (BadNoCommunication, the value null, as OPC 10000-4 §7.7.1 asks) and ``Connected`` FALSE;
 the task retries with a capped backoff and the nodes turn Good with the first poll after it
-reconnects. The poll schedule is absolute (missed periods are skipped, never bunched).
+reconnects. The poll schedule is absolute (missed periods are skipped, never bunched) and
+shared: every robot polls on a grid of the event loop's clock, in one of a few slots per
+period (its ``phase``), so a cell's polls are spread evenly and a slot's robots wake at once.
 """
 
 from __future__ import annotations
@@ -20,8 +22,8 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 import random
-import time
 from collections.abc import Mapping, Sequence
 from datetime import UTC, datetime
 from typing import Any
@@ -72,8 +74,11 @@ class RobotPoller:
         cell: CellNodes,
         sink: Sink,
         max_speed: Sequence[float],
+        phase: float = 0.0,
     ) -> None:
         self.cfg, self.nodes, self.cell, self.sink = cfg, nodes, cell, sink
+        #: where in each poll period this robot's polls fall, 0 <= phase < 1 (see _next_slot)
+        self.phase = phase
         self.max_speed = tuple(max_speed)
         self.client: Client | None = None
         self.connected = False
@@ -154,7 +159,9 @@ class RobotPoller:
         self.last_error = ""
         log.info("robot %s connected (%s:%d)", cfg.name, cfg.host, cfg.port)
         period = 1.0 / cfg.poll_hz
-        due = time.monotonic()
+        loop = asyncio.get_running_loop()
+        # the first poll at once (values as soon as possible), then on this robot's slot
+        due = loop.time()
         fast = [n for n in names if n not in SLOW_VARIABLES]
         count = 0
         while not self._stop.is_set():
@@ -166,12 +173,9 @@ class RobotPoller:
             if kept is not names:
                 names, fast = kept, [n for n in kept if n not in SLOW_VARIABLES]
             self.polls += 1
-            due += period
-            now = time.monotonic()
-            if due < now:  # late: skip the missed periods instead of bunching polls
-                due = now + period - (now - due) % period
-            # a plain sleep: stop() cancels the task, so no per-poll waiter on the event
-            await asyncio.sleep(due - now)
+            due = _next_slot(max(due, loop.time()), period, self.phase)
+            # stop() cancels the task, so no per-poll waiter on the event
+            await _sleep_until(loop, due)
 
     # ------------------------------------------------------------------ reads
 
@@ -394,6 +398,36 @@ _SCALAR_TYPES = (
     ("stopmess_fn_active", _V.Boolean),
     ("stopmess_fn_enabled", _V.Boolean),
 )
+
+
+def _next_slot(after: float, period: float, phase: float) -> float:
+    """The first time later than ``after`` on the grid ``(k + phase) * period``.
+
+    The grid is the event loop's clock, not the time a robot connected: robots given
+    different phases (the gateway spreads them over a few slots) never poll in one burst, and
+    robots sharing a slot wake at exactly the same instant, in one event-loop iteration. A
+    late poll skips the slots it missed instead of bunching polls.
+    """
+    when = (math.floor(after / period - phase) + 1 + phase) * period
+    if when - after < period * 1e-6:  # ``after`` on the grid itself, and rounded below it
+        when += period
+    return when
+
+
+async def _sleep_until(loop: asyncio.AbstractEventLoop, when: float) -> None:
+    """``asyncio.sleep`` to an absolute time (asyncio.sleep adds the clock read at the call,
+    a few microseconds apart for robots of one slot, which then wake one by one)."""
+    waiter = loop.create_future()
+    handle = loop.call_at(when, _wake, waiter)
+    try:
+        await waiter
+    finally:
+        handle.cancel()
+
+
+def _wake(waiter: asyncio.Future[None]) -> None:
+    if not waiter.done():
+        waiter.set_result(None)
 
 
 def _parse(text: str) -> Any:
