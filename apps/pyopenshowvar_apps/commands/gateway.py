@@ -11,6 +11,7 @@ cell file's ``[security]`` users.
 from __future__ import annotations
 
 import asyncio
+import gc
 import logging
 import signal
 import sys
@@ -74,6 +75,9 @@ async def _serve(gw: Gateway) -> None:
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
     async with gw:
+        # the address space lives as long as the process: keep it out of every later garbage
+        # collection (a full one over it would pause the polls for a good fraction of a second)
+        gc.freeze()
         print(f"serving {gw.url}", flush=True)
         if gw.fingerprint:
             print(f"certificate SHA-256 {gw.fingerprint}", flush=True)

@@ -104,13 +104,20 @@ class Decl:
 
 
 class NodeBatch:
-    """AddNodes items collected for one call (parents always before their children)."""
+    """AddNodes items collected for one call (parents always before their children).
 
-    def __init__(self) -> None:
+    A ``dry`` batch collects nothing: the builder walks the model only for the NodeIds (the
+    nodes themselves come from a :class:`~.clone.RobotTemplate`).
+    """
+
+    def __init__(self, *, dry: bool = False) -> None:
+        self.dry = dry
         self.items: list[ua.AddNodesItem] = []
         self.references: list[ua.AddReferencesItem] = []
 
     def reference(self, source: ua.NodeId, ref: ua.NodeId, target: ua.NodeId) -> None:
+        if self.dry:
+            return
         item = ua.AddReferencesItem()
         item.SourceNodeId, item.ReferenceTypeId, item.TargetNodeId = source, ref, target
         item.IsForward = True

@@ -28,6 +28,7 @@ from typing import Any
 
 from asyncua import Server, ua
 
+from .clone import RobotTemplate
 from .model import DI_URI, GATEWAY_URI, ROBOTICS_URI, Instantiator, NodeBatch
 
 __all__ = ["AXES", "CellNodes", "RobotNodes", "TaskNodes", "build_cell", "check_type_ids"]
@@ -210,14 +211,37 @@ async def _commit(server: Server, batch: NodeBatch) -> None:
 
 
 class RobotBuilder:
-    """Adds one robot's MotionDevice, Controller and SafetyState (one AddNodes call)."""
+    """Adds one robot's MotionDevice, Controller and SafetyState.
 
-    def __init__(self, server: Server, inst: Instantiator, cell: CellNodes) -> None:
+    The first robot is instantiated from the types (one AddNodes call); the others are copies
+    of it (:mod:`.clone`, a twentieth of the time) unless ``clone`` is False. Each robot's
+    extra variables are added afterwards, as they differ between robots.
+    """
+
+    def __init__(
+        self, server: Server, inst: Instantiator, cell: CellNodes, *, clone: bool = True
+    ) -> None:
         self.server, self.inst, self.cell = server, inst, cell
         self.ns = cell.ns
         self.ours = cell.ns[GATEWAY_URI]
         self.r = cell.ns[ROBOTICS_URI]
         self.di = cell.ns[DI_URI]
+        self.clone = clone
+        self.template: RobotTemplate | None = None
+
+    async def _add(
+        self,
+        batch: NodeBatch,
+        parent: ua.NodeId,
+        node_id: str,
+        browse_name: ua.QualifiedName,
+        type_definition: ua.NodeId,
+        **kw: Any,
+    ) -> ua.NodeId:
+        """:meth:`Instantiator.add`, or only the NodeId for a dry batch."""
+        if batch.dry:
+            return self._id(node_id)
+        return await self.inst.add(batch, parent, node_id, browse_name, type_definition, **kw)
 
     def _q(self, name: str, ns: int | None = None) -> ua.QualifiedName:
         return ua.QualifiedName(name, self.ours if ns is None else ns)
@@ -226,12 +250,12 @@ class RobotBuilder:
         return ua.NodeId(path, self.ours)
 
     async def build(self, name: str, extras: tuple[str, ...]) -> RobotNodes:
-        batch = NodeBatch()
+        batch = NodeBatch(dry=self.template is not None)
         cell = self.cell
         md_path = f"{cell.motion_devices.Identifier}.{name}"
         ctrl_path = f"{cell.controllers.Identifier}.{name}"
         safe_path = f"{cell.safety_states.Identifier}.{name}"
-        md = await self.inst.add(
+        md = await self._add(
             batch,
             cell.motion_devices,
             md_path,
@@ -239,7 +263,7 @@ class RobotBuilder:
             _rid(self.ns, "MotionDeviceType"),
             optional=frozenset({"ComponentName", "TaskControlReference", "ParameterSet/InControl"}),
         )
-        ctrl = await self.inst.add(
+        ctrl = await self._add(
             batch,
             cell.controllers,
             ctrl_path,
@@ -247,7 +271,7 @@ class RobotBuilder:
             _rid(self.ns, "ControllerType"),
             optional=frozenset({"ComponentName", "ParameterSet"}),
         )
-        safe = await self.inst.add(
+        safe = await self._add(
             batch,
             cell.safety_states,
             safe_path,
@@ -257,11 +281,23 @@ class RobotBuilder:
         )
         nodes = RobotNodes(name, md, ctrl, safe)
         await self._motion_device(batch, nodes, md_path)
-        await self._controller(batch, nodes, ctrl_path, extras)
+        await self._controller(batch, nodes, ctrl_path)
         await self._safety(batch, nodes, safe_path)
         batch.reference(ctrl, _rid(self.ns, "Controls"), md)
         batch.reference(ctrl, _rid(self.ns, "HasSafetyStates"), safe)
-        await _commit(self.server, batch)
+        if self.template is not None:
+            self.template.stamp(self.server, [md, ctrl, safe], name)
+        else:
+            await _commit(self.server, batch)
+            if self.clone:
+                self.template = RobotTemplate.capture(self.server, [md, ctrl, safe], name)
+        own = NodeBatch()
+        params = self._id(f"{ctrl_path}.ParameterSet")
+        for extra in extras:
+            nodes.extras[extra] = await self._variable(
+                own, params, f"{ctrl_path}.ParameterSet.{extra}", extra, ua.ObjectIds.BaseDataType
+            )
+        await _commit(self.server, own)
         return nodes
 
     async def _motion_device(self, batch: NodeBatch, nodes: RobotNodes, path: str) -> None:
@@ -278,7 +314,7 @@ class RobotBuilder:
         nodes.scalars["in_control"] = self._id(f"{path}.ParameterSet.InControl")
         nodes.identity["task_reference"] = [self._id(f"{path}.TaskControlReference")]
         for i, axis in enumerate(AXES, 1):
-            axis_id = await self.inst.add(
+            axis_id = await self._add(
                 batch,
                 self._id(f"{path}.Axes"),
                 f"{path}.Axes.{axis}",
@@ -292,7 +328,7 @@ class RobotBuilder:
             nodes.position.append(self._id(f"{path}.Axes.{axis}.ParameterSet.ActualPosition"))
             nodes.speed.append(self._id(f"{path}.Axes.{axis}.ParameterSet.ActualSpeed"))
             pt_path = f"{path}.PowerTrains.PowerTrain{i}"
-            pt = await self.inst.add(
+            pt = await self._add(
                 batch,
                 self._id(f"{path}.PowerTrains"),
                 pt_path,
@@ -300,9 +336,7 @@ class RobotBuilder:
                 _rid(self.ns, "PowerTrainType"),
             )
             motor_path = f"{pt_path}.Motor{i}"
-            await self.inst.add(
-                batch, pt, motor_path, self._q(f"Motor{i}"), _rid(self.ns, "MotorType")
-            )
+            await self._add(batch, pt, motor_path, self._q(f"Motor{i}"), _rid(self.ns, "MotorType"))
             for key, prop in (
                 ("motor_manufacturer", "Manufacturer"),
                 ("motor_model", "Model"),
@@ -329,13 +363,11 @@ class RobotBuilder:
         self, batch: NodeBatch, parent: ua.NodeId, node_id: str, name: str
     ) -> ua.NodeId:
         double = {"DataType": ua.NodeId(ua.ObjectIds.Double)}
-        return await self.inst.add(
+        return await self._add(
             batch, parent, node_id, self._q(name), _ANALOG_UNIT, attributes=double
         )
 
-    async def _controller(
-        self, batch: NodeBatch, nodes: RobotNodes, path: str, extras: tuple[str, ...]
-    ) -> None:
+    async def _controller(self, batch: NodeBatch, nodes: RobotNodes, path: str) -> None:
         for key, prop in (
             ("controller_manufacturer", "Manufacturer"),
             ("controller_model", "Model"),
@@ -346,7 +378,7 @@ class RobotBuilder:
             nodes.identity.setdefault(key, []).append(self._id(f"{path}.{prop}"))
         nodes.identity["user_level"] = [self._id(f"{path}.CurrentUser.Level")]
         sw_path = f"{path}.Software.KSS"
-        await self.inst.add(
+        await self._add(
             batch,
             self._id(f"{path}.Software"),
             sw_path,
@@ -362,7 +394,7 @@ class RobotBuilder:
             nodes.identity.setdefault(key, []).append(self._id(f"{sw_path}.{prop}"))
         for key, label in (("robot", "RobotInterpreter"), ("submit", "SubmitInterpreter")):
             tc_path = f"{path}.TaskControls.{label}"
-            await self.inst.add(
+            await self._add(
                 batch,
                 self._id(f"{path}.TaskControls"),
                 tc_path,
@@ -387,15 +419,11 @@ class RobotBuilder:
         nodes.connected = await self._variable(
             batch, params, f"{path}.ParameterSet.Connected", "Connected", ua.ObjectIds.Boolean
         )
-        for extra in extras:
-            nodes.extras[extra] = await self._variable(
-                batch, params, f"{path}.ParameterSet.{extra}", extra, ua.ObjectIds.BaseDataType
-            )
 
     async def _variable(
         self, batch: NodeBatch, parent: ua.NodeId, node_id: str, name: str, data_type: int
     ) -> ua.NodeId:
-        return await self.inst.add(
+        return await self._add(
             batch,
             parent,
             node_id,
@@ -421,7 +449,7 @@ class RobotBuilder:
         )
         for folder, fname, tname, key in functions:
             f_path = f"{path}.{folder}.{fname}"
-            await self.inst.add(
+            await self._add(
                 batch, self._id(f"{path}.{folder}"), f_path, self._q(fname), _rid(self.ns, tname)
             )
             nodes.identity.setdefault(f"{key}_name", []).append(self._id(f"{f_path}.Name"))
