@@ -164,9 +164,12 @@ def run(
             assert gw.stdout is not None
             first = gw.stdout.readline().strip()
             startup = time.monotonic() - started
+            # CPU, unlike wall time, barely depends on the machine's load
+            startup_cpu = _cpu_seconds(gw.pid)
             if not first.startswith("serving "):
                 raise RuntimeError(f"gateway did not start: {first!r}")
             result = asyncio.run(_measure(first.split()[1], robots, gw.pid, seconds, publish_ms))
+            result["startup_cpu"] = startup_cpu
         finally:
             gw.terminate()
             gw.wait(20)
@@ -215,8 +218,8 @@ def main() -> None:
             ),
             Row(
                 f"gateway CPU per poll, {n} robots",
-                r["cpu_ms_per_poll"],
-                "ms",
+                r["cpu_ms_per_poll"] * 1e3,
+                "µs",
                 note="CPU seconds / updates seen (A1 changes every poll)",
             ),
             Row(
@@ -241,7 +244,13 @@ def main() -> None:
                 "/s",
                 target=("ours", ">=", 0.95 * args.hz),
             ),
-            Row(f"start-up to 'serving', {n} robots", startup, "s"),
+            Row(f"start-up to 'serving', {n} robots", startup, "s", note="wall time"),
+            Row(
+                f"start-up CPU to 'serving', {n} robots",
+                r["startup_cpu"],
+                "s",
+                note="the gateway process's CPU time (interpreter and imports included)",
+            ),
         ]
     print_rows("kvp gateway (OPC UA Robotics)", rows)
     write_json(args.json, "Gateway", rows, extra)
