@@ -59,8 +59,12 @@ def heave(
         str, typer.Option(help="Accelerometer board's serial device.")
     ] = "/dev/ttyACM0",
     attitude: Annotated[
-        str, typer.Option(help="Roll/pitch from 'accel' (thesis) or 'plc'.")
-    ] = "accel",
+        str,
+        typer.Option(
+            help="Roll/pitch from 'fused' (PLC corrected by the accelerometer), 'accel' "
+            "(the thesis) or 'plc'."
+        ),
+    ] = "fused",
     waves: Annotated[
         str, typer.Option(help="'thesis' (largest amplitudes), 'random' (eq. 4.13 draws).")
     ] = "thesis",
