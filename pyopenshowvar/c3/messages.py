@@ -3,7 +3,7 @@
 Each class knows its message type (``TYPE``), builds its payload (:meth:`Message.payload`) and a
 whole frame (:meth:`Message.frame`), and parses a payload (``parse``) the way the server reads
 it (``source/handlers/*.cpp``: fields in order, trailing bytes ignored). The client encodes
-them, the emulator parses them with :func:`parse_request`, so both use the same layout.
+them, the emulator parses them with ``parse`` (:mod:`kukavarproxy_emu.c3`): one layout for both.
 
 Layouts (spec v1 rev 5 §3.5–§3.10; request = header, type, payload):
 

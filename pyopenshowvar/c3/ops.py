@@ -10,7 +10,7 @@ one message).
 Every operation first makes sure the server has the message it is about to send
 (:meth:`~pyopenshowvar.c3.server.ServerInfo.require`) and that the message can be encoded
 (names, counts, sizes), so a refusal never costs a request, and then sends exactly one message
-per step. Program and file operations are in :mod:`pyopenshowvar.c3.ops_files`.
+per step. Program and file operations are in :mod:`pyopenshowvar.c3.ops_programs`.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from typing import Any
 
-from ..core import Op
+from ..core import Op, ReadResult
 from ..errors import (
     KvpError,
     ProtocolError,
@@ -43,12 +43,11 @@ from .messages import (
     WriteMultiple,
     WriteVariable,
     key_type,
-    motion_type,
     names_tuple,
 )
+from .messages import motion_type as motion_type_of  # the parameter of motion() is motion_type
 from .replies import (
     BenchmarkReply,
-    Echo,
     FeatureMap,
     Multiple,
     Outcome,
@@ -109,9 +108,7 @@ def encode(message: Message) -> bytes:
     """The frame of ``message`` with tag 0, or :class:`RequestTooLargeError` (nothing sent)."""
     try:
         return message.frame(0)
-    except PayloadError as exc:
-        raise RequestTooLargeError(f"{type(message).__name__}: {exc}") from None
-    except ProtocolError as exc:
+    except ProtocolError as exc:  # PayloadError, or a frame over the 16-bit length
         raise RequestTooLargeError(f"{type(message).__name__}: {exc}") from None
 
 
@@ -211,8 +208,6 @@ def read_multiple(
     alone. On our emulator the values come from one interpolation cycle; a real C3 Bridge
     reads them one after the other through CrossComm (docs/c3bridge.md).
     """
-    from ..core import ReadResult
-
     names = names_tuple(names)
     _limit(len(names))
     message = ReadMultiple(names)
@@ -250,8 +245,6 @@ def write_multiple(
     With ``check_all`` (default) any refusal then raises :class:`WriteRefusedError` naming every
     refused variable; its ``results`` attribute holds all outcomes.
     """
-    from ..core import ReadResult
-
     pairs = tuple((n, v if isinstance(v, str) else format_value(v)) for n, v in items)
     _limit(len(pairs))
     message = WriteMultiple(pairs)
@@ -306,7 +299,7 @@ def motion(
 ) -> Op[None]:
     """Start a PTP, LIN, PTP_REL or LIN_REL motion (#11) to a KRL position literal, e.g.
     ``{POS: X 500, Y 0, Z 800, A 0, B 90, C 0}`` or ``{A6 10}`` (relative)."""
-    kind = _motion_type(motion_type)
+    kind = motion_type_of(motion_type)
     text = position if isinstance(position, str) else format_value(position)
     _need_motion(allow_motion, f"a {kind.name} motion")
     message = Motion(kind, text)
@@ -314,13 +307,6 @@ def motion(
     yield from guard(client, Command.MOTION, "motion", timeout)
     out = yield from exchange(client, message, f"{kind.name} {text}", timeout)
     check(client, out, f"{kind.name} {text}")
-
-
-def _motion_type(value: int | str) -> Any:
-    try:
-        return motion_type(value)
-    except ValueError as exc:
-        raise ValueError(str(exc)) from None
 
 
 def kcp_key(
@@ -394,8 +380,3 @@ def benchmark(
     check(client, out, "benchmark")
     reply: BenchmarkReply = _parse(client, out, BenchmarkReply, "#17")
     return reply
-
-
-def echo_of(client: Any, out: Outcome, what: str) -> int:
-    echo: Echo = _parse(client, out, Echo, what)
-    return echo.value

@@ -40,7 +40,16 @@ from .files import (
     Properties,
 )
 from .messages import ProgramControl, ProgramSelect
-from .ops import _need_motion, _parse, check, encode, exchange, guard, server_info
+from .ops import (
+    _need_motion,
+    _parse,
+    check,
+    encode,
+    exchange,
+    guard,
+    read_multiple,
+    server_info,
+)
 from .replies import Value
 
 __all__ = [
@@ -188,8 +197,6 @@ def program_run(
 def program_state(client: Any, *, timeout: float | None = None) -> Op[ProgramState]:
     """``$PRO_STATE1``, ``$PRO_NAME1[]``, ``$PRO_STATE0``, ``$STOPMESS`` (and the emulator's
     ``$EMU_MESSAGE[]``) in one read-multiple on C3 Bridge, pipelined reads on KUKAVARPROXY."""
-    from .ops import read_multiple
-
     info = yield from server_info(client, timeout=timeout)
     names = list(_STATE_NAMES)
     if info.supports(Command.READ_MULTIPLE):

@@ -21,7 +21,6 @@ Payloads (spec v1 rev 5):
 from __future__ import annotations
 
 import datetime as dt
-from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Self
 
@@ -213,7 +212,3 @@ class BenchmarkReply:
     @classmethod
     def parse(cls, r: Reader) -> Self:
         return cls(r.boolean(), r.u8(), r.u32(), r.u32(), r.u32(), r.u32())
-
-
-def multiple_of(items: Iterable[tuple[int, str]]) -> Multiple:
-    return Multiple(tuple(items))
