@@ -14,7 +14,14 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from pyopenshowvar.c3.constants import Command, FileIo, ItemType, MotionType, ProgramCommand
+from pyopenshowvar.c3.constants import (
+    Command,
+    FileIo,
+    ItemType,
+    KcpKey,
+    MotionType,
+    ProgramCommand,
+)
 from pyopenshowvar.c3.files import (
     FileCopy,
     FileCreate,
@@ -49,6 +56,8 @@ from pyopenshowvar.c3.messages import (
     ReadVariable,
     WriteMultiple,
     WriteVariable,
+    key_type,
+    motion_type,
 )
 from pyopenshowvar.c3.replies import (
     BenchmarkReply,
@@ -308,6 +317,16 @@ def test_limits() -> None:
         ReadVariable("A" * 40000).frame(0)
     with pytest.raises(PayloadError):
         Writer().u8(256)
+
+
+def test_motion_and_key_names() -> None:
+    assert motion_type(" lin_rel ") is MotionType.LIN_REL and motion_type(1) is MotionType.PTP
+    assert key_type("jog") is KcpKey.JOG and key_type(2) is KcpKey.STOP
+    # both refuse the same way: a ValueError naming the choices (the CLI turns it into exit 2)
+    with pytest.raises(ValueError, match=r"unknown key 'PRESS' \(START, STOP, JOG, MOUSE_6D\)"):
+        key_type("PRESS")
+    with pytest.raises(ValueError, match=r"unknown motion type 9 \(PTP, LIN, PTP_REL, LIN_REL\)"):
+        motion_type(9)
 
 
 def test_identify() -> None:

@@ -30,7 +30,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import ClassVar, Self
+from enum import IntEnum
+from typing import ClassVar, Self, TypeVar
 
 from ..protocol import Request, encode_request
 from .constants import Command, Interpreter, KcpKey, MotionType, ProgramCommand
@@ -51,6 +52,8 @@ __all__ = [
     "WriteMultiple",
     "WriteVariable",
 ]
+
+_E = TypeVar("_E", bound=IntEnum)
 
 #: A count field of #6/#7/#17 is one byte.
 MAX_COUNT = 255
@@ -296,20 +299,20 @@ class Benchmark(Message):
 
 def motion_type(value: int | str | MotionType) -> MotionType:
     """``"ptp"``, ``"LIN_REL"``, 3, ... → :class:`MotionType` (ValueError for anything else)."""
-    if isinstance(value, str):
-        try:
-            return MotionType[value.strip().upper()]
-        except KeyError:
-            raise ValueError(
-                f"unknown motion type {value!r} (PTP, LIN, PTP_REL, LIN_REL)"
-            ) from None
-    return MotionType(value)
+    return _member(MotionType, value, "motion type")
 
 
 def key_type(value: int | str | KcpKey) -> KcpKey:
-    if isinstance(value, str):
-        return KcpKey[value.strip().upper()]
-    return KcpKey(value)
+    """``"start"``, ``"JOG"``, 2, ... → :class:`KcpKey` (ValueError for anything else)."""
+    return _member(KcpKey, value, "key")
+
+
+def _member(kind: type[_E], value: int | str, what: str) -> _E:
+    try:
+        return kind[value.strip().upper()] if isinstance(value, str) else kind(value)
+    except (KeyError, ValueError):
+        choices = ", ".join(kind.__members__)
+        raise ValueError(f"unknown {what} {value!r} ({choices})") from None
 
 
 def names_tuple(names: Sequence[str]) -> tuple[str, ...]:
