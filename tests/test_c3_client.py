@@ -120,6 +120,23 @@ async def test_requests_over_the_limits_are_refused_before_sending(c3: Emulator)
         assert len(many) == 1 and many["$OV_PRO"].text == "100"
 
 
+async def test_a_request_that_cannot_be_sent_costs_not_even_the_identifying_reads(
+    c3: Emulator,
+) -> None:
+    served = c3.stats.requests
+    async with Client(c3.host, c3.port) as kvp:
+        with pytest.raises(RequestTooLargeError, match="at most 255"):
+            await kvp.write_multiple([("$OV_PRO", 1)] * 256)
+        with pytest.raises(RequestTooLargeError, match="exceeds 65535"):
+            await kvp.read_utf16("X" * 70_000)
+        with pytest.raises(RequestTooLargeError):
+            await kvp.file_write("KRC:\\R1\\" + "X" * 70_000, b"data")
+        with pytest.raises(RequestTooLargeError):
+            await kvp.benchmark(["$OV_PRO"] * 256, 10)
+        assert kvp._c3_info is None  # the server was never asked what it is
+    assert c3.stats.requests == served
+
+
 async def test_upload_select_start_moves_stop_resume_reset(c3: Emulator) -> None:
     async with Client(c3.host, c3.port) as kvp:
         path = await kvp.program_upload(SRC, "pick.src", DAT)

@@ -78,7 +78,9 @@ class Message:
 
 def _count(n: int, what: str) -> int:
     if n > MAX_COUNT:
-        raise PayloadError(f"{n} {what} in one message; the count field holds at most 255")
+        raise PayloadError(
+            f"{n} {what} in one message; its count field holds at most {MAX_COUNT} (split the list)"
+        )
     return n
 
 

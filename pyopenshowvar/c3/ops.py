@@ -7,10 +7,10 @@ of both clients. The client offers ``endpoint``, ``read_many(names, timeout=)``,
 :class:`~pyopenshowvar.protocol.Reply`) and ``_c3_chunk`` (the largest file chunk it sends in
 one message).
 
-Every operation first makes sure the server has the message it is about to send
-(:meth:`~pyopenshowvar.c3.server.ServerInfo.require`) and that the message can be encoded
-(names, counts, sizes), so a refusal never costs a request, and then sends exactly one message
-per step. Program and file operations are in :mod:`pyopenshowvar.c3.ops_programs`.
+Every operation sends its first message through :func:`send`, which encodes it (names,
+counts, sizes: :class:`RequestTooLargeError`) and then makes sure the server has it
+(:meth:`~pyopenshowvar.c3.server.ServerInfo.require`), so a refusal never costs a request;
+further messages of the same operation go through :func:`exchange`, exactly one per step. Program and file operations are in :mod:`pyopenshowvar.c3.ops_programs`.
 """
 
 from __future__ import annotations
@@ -27,10 +27,9 @@ from ..errors import (
     WriteRefusedError,
 )
 from ..krl import KrlValue, format_value, parse_value
-from .constants import Command, ErrorCode, Interpreter, KcpKey
+from .constants import ErrorCode, Interpreter, KcpKey
 from .errors import C3CommandError, MotionNotAllowedError, RequestTooLargeError
 from .messages import (
-    MAX_COUNT,
     Benchmark,
     ConfirmAll,
     KcpAction,
@@ -63,13 +62,13 @@ __all__ = [
     "check",
     "confirm_all",
     "exchange",
-    "guard",
     "kcp_key",
     "motion",
     "proxy_features",
     "proxy_info",
     "read_multiple",
     "read_utf16",
+    "send",
     "server_info",
     "write_multiple",
     "write_utf16",
@@ -98,12 +97,6 @@ def server_info(
     return info
 
 
-def guard(client: Any, command: int, what: str, timeout: float | None) -> Op[ServerInfo]:
-    info = yield from server_info(client, timeout=timeout)
-    info.require(command, what, client.endpoint)
-    return info
-
-
 def encode(message: Message) -> bytes:
     """The frame of ``message`` with tag 0, or :class:`RequestTooLargeError` (nothing sent)."""
     try:
@@ -112,15 +105,31 @@ def encode(message: Message) -> bytes:
         raise RequestTooLargeError(f"{type(message).__name__}: {exc}") from None
 
 
-def exchange(client: Any, message: Message, label: str, timeout: float | None) -> Op[Outcome]:
-    """Send one message, return its reply's :class:`Outcome` (any footer)."""
+def send(
+    client: Any, message: Message, method: str, label: str, timeout: float | None
+) -> Op[Outcome]:
+    """The first message of operation ``method``: encoded, then checked against what the server
+    offers (both raise before anything is sent, the identifying reads included), then sent."""
     frame = encode(message)
+    info = yield from server_info(client, timeout=timeout)
+    info.require(message.TYPE, method, client.endpoint)
+    return (yield from _round_trip(client, frame, message.TYPE, label, timeout))
+
+
+def exchange(client: Any, message: Message, label: str, timeout: float | None) -> Op[Outcome]:
+    """A further message of an operation whose first one went through :func:`send`."""
+    return (yield from _round_trip(client, encode(message), message.TYPE, label, timeout))
+
+
+def _round_trip(
+    client: Any, frame: bytes, msg_type: int, label: str, timeout: float | None
+) -> Op[Outcome]:
+    """Send one frame, return its reply's :class:`Outcome` (any footer)."""
     reply = yield ("_request", (label, frame, timeout), {})
     out = Outcome.of(reply)
-    if out.type != message.TYPE:
+    if out.type != msg_type:
         raise ProtocolError(
-            f"{client.endpoint} answered {label} with message type {out.type}, "
-            f"not {int(message.TYPE)}"
+            f"{client.endpoint} answered {label} with message type {out.type}, not {msg_type}"
         )
     return out
 
@@ -153,8 +162,7 @@ def _read_error(client: Any, name: str, code: int) -> KvpError:
 
 def read_utf16(client: Any, name: str, *, timeout: float | None = None) -> Op[str]:
     """Read one variable with message #4 (name and value travel as UTF-16)."""
-    yield from guard(client, Command.READ_VARIABLE, "read_utf16", timeout)
-    out = yield from exchange(client, ReadVariable(name), name, timeout)
+    out = yield from send(client, ReadVariable(name), "read_utf16", name, timeout)
     if not out.ok:
         raise _read_error(client, name, out.code)
     value: str = _parse(client, out, Value, "#4").value
@@ -166,8 +174,7 @@ def write_utf16(
 ) -> Op[str]:
     """Write one variable with message #5 (UTF-16); returns the server's echo."""
     text = value if isinstance(value, str) else format_value(value)
-    yield from guard(client, Command.WRITE_VARIABLE, "write_utf16", timeout)
-    out = yield from exchange(client, WriteVariable(name, text), name, timeout)
+    out = yield from send(client, WriteVariable(name, text), "write_utf16", name, timeout)
     if not out.ok:
         raise WriteRefusedError(
             f"write refused, {error_name(out.code)}",
@@ -177,14 +184,6 @@ def write_utf16(
         )
     echo: str = _parse(client, out, Value, "#5").value
     return echo
-
-
-def _limit(count: int) -> None:
-    if count > MAX_COUNT:
-        raise RequestTooLargeError(
-            f"{count} variables in one message; C3 Bridge takes at most {MAX_COUNT} "
-            "(split the list: each message is one consistent snapshot)"
-        )
 
 
 def _multiple_reply(client: Any, out: Outcome, what: str, count: int) -> Multiple:
@@ -209,11 +208,8 @@ def read_multiple(
     reads them one after the other through CrossComm (docs/c3bridge.md).
     """
     names = names_tuple(names)
-    _limit(len(names))
     message = ReadMultiple(names)
-    encode(message)  # too long a name or list: refused before the server is even asked
-    yield from guard(client, Command.READ_MULTIPLE, "read_multiple", timeout)
-    out = yield from exchange(client, message, f"{len(names)} variables", timeout)
+    out = yield from send(client, message, "read_multiple", f"{len(names)} variables", timeout)
     multi = _multiple_reply(client, out, "read_multiple", len(names))
     results: dict[str, Any] = {}
     for name, (code, text) in zip(names, multi.items, strict=True):
@@ -246,11 +242,8 @@ def write_multiple(
     refused variable; its ``results`` attribute holds all outcomes.
     """
     pairs = tuple((n, v if isinstance(v, str) else format_value(v)) for n, v in items)
-    _limit(len(pairs))
     message = WriteMultiple(pairs)
-    encode(message)
-    yield from guard(client, Command.WRITE_MULTIPLE, "write_multiple", timeout)
-    out = yield from exchange(client, message, f"{len(pairs)} variables", timeout)
+    out = yield from send(client, message, "write_multiple", f"{len(pairs)} variables", timeout)
     multi = _multiple_reply(client, out, "write_multiple", len(pairs))
     results: dict[str, Any] = {}
     refused: list[str] = []
@@ -302,10 +295,7 @@ def motion(
     kind = motion_type_of(motion_type)
     text = position if isinstance(position, str) else format_value(position)
     _need_motion(allow_motion, f"a {kind.name} motion")
-    message = Motion(kind, text)
-    encode(message)
-    yield from guard(client, Command.MOTION, "motion", timeout)
-    out = yield from exchange(client, message, f"{kind.name} {text}", timeout)
+    out = yield from send(client, Motion(kind, text), "motion", f"{kind.name} {text}", timeout)
     check(client, out, f"{kind.name} {text}")
 
 
@@ -325,16 +315,14 @@ def kcp_key(
     kind = key_type(key)
     if kind in (KcpKey.START, KcpKey.JOG, KcpKey.MOUSE_6D) and not released:
         _need_motion(allow_motion, f"the {kind.name} key")
-    yield from guard(client, Command.KCP_ACTION, "kcp_key", timeout)
     message = KcpAction(kind, target, key_code, direction, released)
-    out = yield from exchange(client, message, f"{kind.name} key", timeout)
+    out = yield from send(client, message, "kcp_key", f"{kind.name} key", timeout)
     check(client, out, f"{kind.name} key")
 
 
 def confirm_all(client: Any, *, timeout: float | None = None) -> Op[None]:
     """Acknowledge every message on the controller (#63, the smartPAD's "Confirm all")."""
-    yield from guard(client, Command.CROSS_CONFIRM_ALL, "confirm_all", timeout)
-    out = yield from exchange(client, ConfirmAll(), "confirm all", timeout)
+    out = yield from send(client, ConfirmAll(), "confirm_all", "confirm all", timeout)
     check(client, out, "confirm all")
 
 
@@ -343,8 +331,7 @@ def confirm_all(client: Any, *, timeout: float | None = None) -> Op[None]:
 
 def proxy_info(client: Any, *, timeout: float | None = None) -> Op[ProxyInfoReply]:
     """Version, UTC clock and computer name of the C3 Bridge server (#13)."""
-    yield from guard(client, Command.PROXY_INFO, "proxy_info", timeout)
-    out = yield from exchange(client, ProxyInfo(), "proxy info", timeout)
+    out = yield from send(client, ProxyInfo(), "proxy_info", "proxy info", timeout)
     check(client, out, "proxy info")
     reply: ProxyInfoReply = _parse(client, out, ProxyInfoReply, "#13")
     return reply
@@ -352,8 +339,7 @@ def proxy_info(client: Any, *, timeout: float | None = None) -> Op[ProxyInfoRepl
 
 def proxy_features(client: Any, *, timeout: float | None = None) -> Op[frozenset[int]]:
     """The message types the server handles, from its 256-bit map (#14)."""
-    yield from guard(client, Command.PROXY_FEATURES, "proxy_features", timeout)
-    out = yield from exchange(client, ProxyFeatures(), "proxy features", timeout)
+    out = yield from send(client, ProxyFeatures(), "proxy_features", "proxy features", timeout)
     check(client, out, "proxy features")
     features: FeatureMap = _parse(client, out, FeatureMap, "#14")
     return features.types
@@ -372,11 +358,8 @@ def benchmark(
     C3 Bridge itself takes at most 10 names; the reply says how many it used.
     """
     names = names_tuple(names)
-    _limit(len(names))
     message = Benchmark(names, iterations, tuple(values) if values is not None else None)
-    encode(message)
-    yield from guard(client, Command.PROXY_BENCHMARK, "benchmark", timeout)
-    out = yield from exchange(client, message, "benchmark", timeout)
+    out = yield from send(client, message, "benchmark", "benchmark", timeout)
     check(client, out, "benchmark")
     reply: BenchmarkReply = _parse(client, out, BenchmarkReply, "#17")
     return reply

@@ -39,18 +39,18 @@ from .files import (
     NameList,
     Properties,
 )
-from .messages import ProgramControl, ProgramSelect
+from .messages import Message, ProgramControl, ProgramSelect
 from .ops import (
     _need_motion,
     _parse,
     check,
     encode,
     exchange,
-    guard,
     read_multiple,
+    send,
     server_info,
 )
-from .replies import Value
+from .replies import Outcome, Value
 
 __all__ = [
     "MAX_DOWNLOAD",
@@ -110,8 +110,8 @@ def _control(
     client: Any, command: ProgramCommand, interpreter: int, timeout: float | None
 ) -> Op[None]:
     what = f"program {command.name.lower()} ({Interpreter(interpreter).name.lower()} interpreter)"
-    yield from guard(client, Command.PROGRAM_CONTROL, f"program_{command.name.lower()}", timeout)
-    out = yield from exchange(client, ProgramControl(command, interpreter), what, timeout)
+    message = ProgramControl(command, interpreter)
+    out = yield from send(client, message, f"program_{command.name.lower()}", what, timeout)
     check(client, out, what)
 
 
@@ -161,10 +161,8 @@ def _select(
     if not name.strip():
         raise ValueError("program name is empty")
     message = ProgramSelect(name, parameters, force, command)
-    encode(message)
-    yield from guard(client, Command.PROGRAM_CONTROL, f"program_{command.name.lower()}", timeout)
     what = f"program {command.name.lower()} {name}"
-    out = yield from exchange(client, message, what, timeout)
+    out = yield from send(client, message, f"program_{command.name.lower()}", what, timeout)
     check(client, out, what)
 
 
@@ -223,10 +221,16 @@ def program_state(client: Any, *, timeout: float | None = None) -> Op[ProgramSta
 # --------------------------------------------------------------------------- files
 
 
-def _simple(client: Any, message: Any, what: str, timeout: float | None) -> Op[Any]:
-    encode(message)
-    yield from guard(client, message.TYPE, what.split(" ")[0], timeout)
-    out = yield from exchange(client, message, what, timeout)
+def _file_op(
+    client: Any, message: Message, method: str, subject: str, timeout: float | None
+) -> Op[Outcome]:
+    """One file message of operation ``method`` on ``subject``, checked (with a hint)."""
+    what = f"{method} of {subject}"
+    out = yield from send(client, message, method, what, timeout)
+    return _checked(client, out, what)
+
+
+def _checked(client: Any, out: Outcome, what: str) -> Outcome:
     return check(client, out, what, _FILE_HINTS.get(out.code, ""))
 
 
@@ -249,28 +253,28 @@ def file_list(
 ) -> Op[NameList]:
     """Names (and info strings) of the items in a directory (#21)."""
     message = FileNameList(path, item_type, flags | (1 if recursive else 0))
-    out = yield from _simple(client, message, f"file_list of {path}", timeout)
+    out = yield from _file_op(client, message, "file_list", path, timeout)
     listing: NameList = _parse(client, out, NameList, "#21")
     return listing
 
 
 def file_properties(client: Any, name: str, *, timeout: float | None = None) -> Op[Properties]:
     """Type, size, attributes, times and edit mode of one item (#26)."""
-    out = yield from _simple(client, FileGetProperties(name), f"file_properties of {name}", timeout)
+    out = yield from _file_op(client, FileGetProperties(name), "file_properties", name, timeout)
     props: Properties = _parse(client, out, Properties, "#26")
     return props
 
 
 def file_full_name(client: Any, path: str, *, timeout: float | None = None) -> Op[str]:
     """``/R1/TEST.SRC`` → ``KRC:\\R1\\PROGRAM\\TEST.SRC`` (#27)."""
-    out = yield from _simple(client, FileGetFullName(path), f"file_full_name of {path}", timeout)
+    out = yield from _file_op(client, FileGetFullName(path), "file_full_name", path, timeout)
     value: str = _parse(client, out, Value, "#27").value
     return value
 
 
 def file_krc_name(client: Any, path: str, *, timeout: float | None = None) -> Op[str]:
     """``KRC:\\R1\\PROGRAM\\TEST.SRC`` → ``/R1/TEST.SRC`` (#28)."""
-    out = yield from _simple(client, FileGetKrcName(path), f"file_krc_name of {path}", timeout)
+    out = yield from _file_op(client, FileGetKrcName(path), "file_krc_name", path, timeout)
     value: str = _parse(client, out, Value, "#28").value
     return value
 
@@ -279,7 +283,7 @@ def file_delete(
     client: Any, name: str, *, always: bool = False, timeout: float | None = None
 ) -> Op[None]:
     """Delete a file (#23); ``always`` deletes a read-only one too."""
-    yield from _simple(client, FileDelete(name, always), f"file_delete of {name}", timeout)
+    yield from _file_op(client, FileDelete(name, always), "file_delete", name, timeout)
 
 
 def file_create(
@@ -294,7 +298,7 @@ def file_create(
 ) -> Op[None]:
     """Create an empty file, module or directory (#22)."""
     message = FileCreate(name, item_type, module_part, always, template)
-    yield from _simple(client, message, f"file_create of {name}", timeout)
+    yield from _file_op(client, message, "file_create", name, timeout)
 
 
 def file_copy(
@@ -302,7 +306,7 @@ def file_copy(
 ) -> Op[None]:
     """Copy a file (#24); ``flags`` are :class:`CopyFlag` (e.g. ``OVERWRITE``)."""
     message = FileCopy(source, destination, flags)
-    yield from _simple(client, message, f"file_copy of {source}", timeout)
+    yield from _file_op(client, message, "file_copy", source, timeout)
 
 
 def file_move(
@@ -310,7 +314,7 @@ def file_move(
 ) -> Op[None]:
     """Move or rename a file (#25)."""
     message = FileMove(source, destination, flags)
-    yield from _simple(client, message, f"file_move of {source}", timeout)
+    yield from _file_op(client, message, "file_move", source, timeout)
 
 
 def file_set_attribute(
@@ -318,7 +322,7 @@ def file_set_attribute(
 ) -> Op[None]:
     """Set the attributes under ``mask`` to ``attributes`` (#20), e.g. READ_ONLY."""
     message = FileSetAttribute(name, attributes, mask)
-    yield from _simple(client, message, f"file_set_attribute of {name}", timeout)
+    yield from _file_op(client, message, "file_set_attribute", name, timeout)
 
 
 def file_write(
@@ -334,13 +338,10 @@ def file_write(
     if len(data) > 0xFFFFFFFF:
         raise RequestTooLargeError(f"{len(data)} bytes do not fit the protocol's 32-bit size")
     end = FileWriteEnd(name, int(CopyFlag.OVERWRITE) if overwrite else 0)
-    encode(end)
-    yield from guard(client, Command.FILE_WRITE_CONTENT, "file_write", timeout)
+    encode(end)  # the name is refused before the upload starts
     what = f"upload of {name}"
-    out = yield from exchange(client, FileWriteBegin(len(data)), what, timeout)
-    size: IoSize = _parse(
-        client, check(client, out, what, _FILE_HINTS.get(out.code, "")), IoSize, "#29 begin"
-    )
+    out = yield from send(client, FileWriteBegin(len(data)), "file_write", what, timeout)
+    size: IoSize = _parse(client, _checked(client, out, what), IoSize, "#29 begin")
     if size.size != len(data):
         raise C3CommandError(
             what, out.code, endpoint=client.endpoint,
@@ -359,7 +360,7 @@ def file_write(
             )  # fmt: skip
         offset += len(piece)
     out = yield from exchange(client, end, what, timeout)
-    check(client, out, what, _FILE_HINTS.get(out.code, ""))
+    _checked(client, out, what)
     return len(data)
 
 
@@ -367,14 +368,9 @@ def file_read(
     client: Any, name: str, *, max_size: int = MAX_DOWNLOAD, timeout: float | None = None
 ) -> Op[bytes]:
     """Download file ``name`` (#30: begin, data chunks, end); at most ``max_size`` bytes."""
-    begin = FileReadBegin(name)
-    encode(begin)
-    yield from guard(client, Command.FILE_READ_CONTENT, "file_read", timeout)
     what = f"download of {name}"
-    out = yield from exchange(client, begin, what, timeout)
-    size: IoSize = _parse(
-        client, check(client, out, what, _FILE_HINTS.get(out.code, "")), IoSize, "#30 begin"
-    )
+    out = yield from send(client, FileReadBegin(name), "file_read", what, timeout)
+    size: IoSize = _parse(client, _checked(client, out, what), IoSize, "#30 begin")
     try:
         data = yield from _download(client, name, size.size, max_size, what, timeout)
     except GeneratorExit:  # the caller was cancelled: nothing more may be sent from here
