@@ -26,7 +26,7 @@ from ..errors import (
     UnknownVariableError,
     WriteRefusedError,
 )
-from ..krl import KrlValue, format_value, parse_value
+from ..krl import KrlValue
 from .constants import ErrorCode, Interpreter, KcpKey
 from .errors import C3CommandError, MotionNotAllowedError, RequestTooLargeError
 from .messages import (
@@ -173,7 +173,7 @@ def write_utf16(
     client: Any, name: str, value: KrlValue | str, *, timeout: float | None = None
 ) -> Op[str]:
     """Write one variable with message #5 (UTF-16); returns the server's echo."""
-    text = value if isinstance(value, str) else format_value(value)
+    text = client._text(value)
     out = yield from send(client, WriteVariable(name, text), "write_utf16", name, timeout)
     if not out.ok:
         raise WriteRefusedError(
@@ -219,7 +219,7 @@ def read_multiple(
         value = None
         if typed:
             try:
-                value = parse_value(text)
+                value = client._parse(name, text, None)  # names it, as read_many does
             except KvpError as exc:
                 results[name] = ReadResult(name, text=text, error=exc)
                 continue
@@ -241,7 +241,7 @@ def write_multiple(
     With ``check_all`` (default) any refusal then raises :class:`WriteRefusedError` naming every
     refused variable; its ``results`` attribute holds all outcomes.
     """
-    pairs = tuple((n, v if isinstance(v, str) else format_value(v)) for n, v in items)
+    pairs = tuple((n, client._text(v)) for n, v in items)
     message = WriteMultiple(pairs)
     out = yield from send(client, message, "write_multiple", f"{len(pairs)} variables", timeout)
     multi = _multiple_reply(client, out, "write_multiple", len(pairs))
@@ -293,7 +293,7 @@ def motion(
     """Start a PTP, LIN, PTP_REL or LIN_REL motion (#11) to a KRL position literal, e.g.
     ``{POS: X 500, Y 0, Z 800, A 0, B 90, C 0}`` or ``{A6 10}`` (relative)."""
     kind = motion_type_of(motion_type)
-    text = position if isinstance(position, str) else format_value(position)
+    text = client._text(position)
     _need_motion(allow_motion, f"a {kind.name} motion")
     out = yield from send(client, Motion(kind, text), "motion", f"{kind.name} {text}", timeout)
     check(client, out, f"{kind.name} {text}")
