@@ -99,6 +99,9 @@ async def test_detection_and_variables(c3: Emulator) -> None:
             await kvp.write_multiple([("$OV_PRO", 60), ("$AXIS_ACT", "{A1 0}")])
         assert err.value.results["$OV_PRO"].text == "60"  # type: ignore[attr-defined]
         assert await kvp.read("$OV_PRO") == "60"  # the others were applied
+        with pytest.raises(C3CommandError, match="read fewer or shorter variables") as long:
+            await kvp.read_multiple(["$OUT[]"] * 3)  # 3 x 24 KiB of UTF-16: not one message
+        assert long.value.code == ErrorCode.LONG_ANSWER
 
 
 async def test_requests_over_the_limits_are_refused_before_sending(c3: Emulator) -> None:

@@ -189,8 +189,12 @@ def write_utf16(
 def _multiple_reply(client: Any, out: Outcome, what: str, count: int) -> Multiple:
     multi: Multiple = _parse(client, out, Multiple, what)
     if not out.ok and out.code in (ErrorCode.PROTOCOL, ErrorCode.LONG_ANSWER) and not multi.items:
-        hint = " (read fewer or shorter variables per message)" if out.code == 10 else ""
-        raise C3CommandError(what, out.code, endpoint=client.endpoint, detail=hint.strip(" ()"))
+        hint = (
+            "read fewer or shorter variables per message"
+            if out.code == ErrorCode.LONG_ANSWER
+            else ""
+        )
+        raise C3CommandError(what, out.code, endpoint=client.endpoint, detail=hint)
     if len(multi.items) != count:
         raise ProtocolError(
             f"{client.endpoint} answered {what} with {len(multi.items)} values for {count} names"
