@@ -23,7 +23,8 @@ from pyopenshowvar.c3.constants import (
     ItemType,
     ListFlag,
 )
-from pyopenshowvar.c3.wire import PayloadError, Reader, Writer
+from pyopenshowvar.c3.replies import Value
+from pyopenshowvar.c3.wire import PayloadError, Reader
 from pyopenshowvar.c3.wire import utf16_units as units
 
 from .vfs import VfsError, VirtualFS, filetime
@@ -140,11 +141,11 @@ class FileHandlers:
 
     def full_name(self, r: Reader, io: IoBuffers) -> Result:
         path = f.FileGetFullName.parse(r).path
-        return Writer().wstr(self.vfs.full_name(path)).payload(), ErrorCode.SUCCESS
+        return Value(self.vfs.full_name(path)).payload(), ErrorCode.SUCCESS
 
     def krc_name(self, r: Reader, io: IoBuffers) -> Result:
         path = f.FileGetKrcName.parse(r).path
-        return Writer().wstr(self.vfs.krc_name(path)).payload(), ErrorCode.SUCCESS
+        return Value(self.vfs.krc_name(path)).payload(), ErrorCode.SUCCESS
 
     # ------------------------------------------------------------------ #29 upload
 
@@ -239,6 +240,6 @@ _HANDLERS: dict[int, Callable[[FileHandlers, Reader, IoBuffers], Result]] = {
 _FAILED_PAYLOAD = {
     21: f.NameList(()).payload(),
     26: f.Properties("").payload(),
-    27: Writer().wstr("").payload(),
-    28: Writer().wstr("").payload(),
+    27: Value("").payload(),
+    28: Value("").payload(),
 }

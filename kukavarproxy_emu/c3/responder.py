@@ -11,7 +11,9 @@ and download buffers. Behaviour follows ``source/client.cpp`` and ``source/handl
   the connection without an answer (the server's ``performDisconnect(ErrorUnknownInput)``);
   :meth:`C3Session.answer` raises :class:`~pyopenshowvar.errors.ProtocolError`, which the
   connection turns into a close after the replies already owed;
-* every handled message is answered, a payload that ends early with ErrorProtocol.
+* every handled message is answered, a payload that ends early with ErrorProtocol; an answer
+  too long for one message is ErrorLongAnswer where the server says so (#6, #7, #21) and
+  otherwise closes the connection (the server's ``performDisconnect(ErrorBuildMessage)``).
 
 Each message is answered in one synchronous call, between two interpolation cycles, so a
 read-multiple returns values of one cycle.
@@ -27,8 +29,15 @@ from typing import TYPE_CHECKING
 
 from pyopenshowvar.c3 import messages as m
 from pyopenshowvar.c3.constants import C3_TYPE_NAME, Command, ErrorCode, VersionType
-from pyopenshowvar.c3.replies import BenchmarkReply, Echo, FeatureMap, Multiple, ProxyInfoReply
-from pyopenshowvar.c3.wire import PayloadError, Reader, Writer
+from pyopenshowvar.c3.replies import (
+    BenchmarkReply,
+    Echo,
+    FeatureMap,
+    Multiple,
+    ProxyInfoReply,
+    Value,
+)
+from pyopenshowvar.c3.wire import PayloadError, Reader
 from pyopenshowvar.errors import ProtocolError
 from pyopenshowvar.protocol import Mode, Reply, Request
 
@@ -114,7 +123,8 @@ class C3Session(Responder):
     """One connection's responder: C3 Bridge semantics over the shared store."""
 
     def __init__(self, server: C3Server) -> None:
-        super().__init__(server.store, strict=True, ping=True)
+        # PING is one of the server's internal variables, asked after KRL (_lookup)
+        super().__init__(server.store, strict=True, ping=False)
         self.server = server
         self.io = IoBuffers()
 
@@ -144,22 +154,26 @@ class C3Session(Responder):
             return super().answer(request, msg_id)
         payload = request.value or b""
         handler = _HANDLERS.get(mode)
-        if handler is not None:
-            out, code = handler(self, payload)
-        else:
-            out, code = self.server.files.handle(mode, payload, self.io)
-        if len(out) > 0xFFFF - 4:  # it cannot be one message: the server's ErrorLongAnswer
-            out, code = b"", ErrorCode.LONG_ANSWER
+        try:
+            if handler is not None:
+                out, code = handler(self, payload)
+            else:
+                out, code = self.server.files.handle(mode, payload, self.io)
+        except PayloadError as exc:  # handlers parse safely: this is an answer over 65531 bytes
+            raise ProtocolError(
+                f"the answer to message #{mode} does not fit one message ({exc}): "
+                "C3 Bridge disconnects (ErrorBuildMessage)"
+            ) from None
         ok = code == ErrorCode.SUCCESS
         return Reply(msg_id, mode, out, 1 if ok else 0, int(code).to_bytes(2, "big"))
 
     def _lookup(self, name: str) -> str | None:
         if name.startswith("@"):  # no KRL name starts with @: the server's own variables
             return self.server.internal(name)
-        text = self.show_var(name)  # a KRL variable of the same name wins (spec §3.5.1)
-        if text is not None:
-            return text
-        return self.server.internal(name)
+        # A KRL variable of the same name wins (spec §3.5.1). The responder's lookup does not
+        # format a whole array no reply can carry (issue 16's bound holds for C3 reads too).
+        text = super()._lookup(name)
+        return text if text is not None else self.server.internal(name)
 
     # ------------------------------------------------------------------ #4..#7
 
@@ -167,21 +181,21 @@ class C3Session(Responder):
         try:
             name = m.ReadVariable.parse(Reader(payload)).name
         except PayloadError:
-            return Writer().wstr("").payload(), ErrorCode.PROTOCOL
+            return Value("").payload(), ErrorCode.PROTOCOL
         value = self._lookup(name)
         if value is None:
-            return Writer().wstr("").payload(), ErrorCode.GENERAL
-        return Writer().wstr(value).payload(), ErrorCode.SUCCESS
+            return Value("").payload(), ErrorCode.GENERAL
+        return Value(value).payload(), ErrorCode.SUCCESS
 
     def write_variable(self, payload: bytes) -> tuple[bytes, int]:
         try:
             msg = m.WriteVariable.parse(Reader(payload))
         except PayloadError:
-            return Writer().wstr("").payload(), ErrorCode.PROTOCOL
+            return Value("").payload(), ErrorCode.PROTOCOL
         text = msg.value.encode("latin-1", "replace").decode("latin-1")  # KRC text is ANSI
         if not self.set_var(msg.name, text):
-            return Writer().wstr("").payload(), ErrorCode.GENERAL
-        return Writer().wstr(msg.value).payload(), ErrorCode.SUCCESS
+            return Value("").payload(), ErrorCode.GENERAL
+        return Value(msg.value).payload(), ErrorCode.SUCCESS
 
     def read_multiple(self, payload: bytes) -> tuple[bytes, int]:
         try:
@@ -212,9 +226,7 @@ class C3Session(Responder):
     def _multiple(items: list[tuple[int, str]]) -> tuple[bytes, int]:
         try:
             out = Multiple(tuple(items)).payload()
-        except PayloadError:
-            return bytes(1), ErrorCode.LONG_ANSWER
-        if len(out) > 0xFFFF - 4:
+        except PayloadError:  # over one message: the server's ErrorLongAnswer, count 0
             return bytes(1), ErrorCode.LONG_ANSWER
         failed = any(code != ErrorCode.SUCCESS for code, _ in items)
         return out, ErrorCode.GENERAL if failed else ErrorCode.SUCCESS

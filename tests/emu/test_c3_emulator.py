@@ -227,3 +227,24 @@ async def test_work_per_message_is_bounded(emulator_factory: EmulatorFactory) ->
         emu.c3.vfs.write("KRC:\\R1\\Program\\BIG.SRC", big, overwrite=True)
         out = await outcome(raw, ProgramSelect("/R1/BIG").frame(4))
         assert out.code == ErrorCode.MEMORY
+
+
+async def test_an_array_no_message_can_carry_is_refused_unformatted(
+    emulator_factory: EmulatorFactory,
+) -> None:
+    """Issue 16's bound holds for C3 reads too: a whole array of more than WHOLE_ARRAY_LIMIT
+    elements is never formatted. #6 answers ErrorLongAnswer and the KVP read a failure; #4,
+    whose answer the server cannot build, closes the connection (its ErrorBuildMessage)."""
+    from kukavarproxy_emu.store import WHOLE_ARRAY_LIMIT
+
+    emu = await emulator_factory(proxy="c3bridge", robot=False)
+    emu.store.declare("BIG", "INT", (2 * WHOLE_ARRAY_LIMIT,), "0")
+    async with await RawClient.connect(emu.host, emu.port) as raw:
+        out = await outcome(raw, ReadMultiple(("$OV_PRO", "BIG[]")).frame(1))
+        assert (out.code, out.ok, out.payload) == (ErrorCode.LONG_ANSWER, False, H("00"))
+        assert await raw.request(encode_read(2, "BIG[]")) == H("0002 0006 00 0000 0000 00")
+        await raw.send(ReadVariable("BIG[]").frame(3))
+        assert await raw.is_closed_by_peer()
+    assert emu.store._vars["BIG"].elem_text is None  # not one element was formatted
+    async with await RawClient.connect(emu.host, emu.port) as raw:  # the emulator serves on
+        assert (await outcome(raw, ReadVariable("BIG[1]").frame(4))).ok
