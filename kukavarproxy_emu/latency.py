@@ -274,6 +274,12 @@ class ServiceQueue:
     lets a tick run only when the next reply is further away than the tick takes, and booking a
     request releases the ticks held meanwhile (``motion.clock.release``): they run in the
     shadow of the reply just booked, which is at least the profile's floor away.
+
+    The profile's samples are round trips as a client measured them on a real controller, so
+    the emulator's own part of a round trip is taken out of the wait, not added to it: the
+    request is booked at the moment its bytes were read (``arrival``, before the worker task
+    gets to it), and the timer aims the running median of the reply's computing time early,
+    so the reply is handed to the socket at its deadline rather than that long after it.
     """
 
     def __init__(self, profile: LatencyProfile, rng: random.Random) -> None:
@@ -288,35 +294,52 @@ class ServiceQueue:
         #: How late each recent reply was computed after its deadline (s; the benchmarks'
         #: view of what delays replies: a busy loop, a slow read).
         self.late: deque[float] = deque(maxlen=10_000)
+        #: Recent computing times of a reply (s) and the lead taken from them.
+        self._costs: deque[float] = deque(maxlen=DeadlineTimer.WINDOW)
+        self.compute_lead = 0.0
 
-    async def run(self, kind: Kind, compute: Callable[[], T], weight: int = 1) -> T:
+    async def run(
+        self,
+        kind: Kind,
+        compute: Callable[[], T],
+        weight: int = 1,
+        arrival: float | None = None,
+    ) -> T:
         """Answer with ``compute()`` after ``weight`` sampled service times of ``kind``.
 
         ``weight`` > 1 is a request the controller serves with that many CrossComm calls in a
-        row (a C3 Bridge read-multiple of N variables).
+        row (a C3 Bridge read-multiple of N variables). ``arrival`` is when the request's bytes
+        were read (``time.monotonic()``; default: now).
         """
-        deadline = self.scheduler.reserve(kind, time.monotonic(), weight)
+        now = time.monotonic()
+        start = now if arrival is None else min(arrival, now)
+        deadline = self.scheduler.reserve(kind, start, weight)
         if self._loop is None:
             self._loop = asyncio.get_running_loop()
             _QUEUES.setdefault(self._loop, weakref.WeakSet()).add(self)
         self.pending.append(deadline)
         _release_ticks(self._loop)
         try:
-            await TIMER.wait_until(deadline)
+            await TIMER.wait_until(deadline - self.compute_lead)
         finally:
             self.pending.remove(deadline)
         woke = time.monotonic()
         self.scheduler.answered(deadline, woke)
         self.served += 1
         reply = compute()
-        self.last_reply = time.monotonic()
-        self.late.append(self.last_reply - deadline)
+        self.last_reply = done = time.monotonic()
+        self.late.append(done - deadline)
+        self._costs.append(done - woke)
+        self.compute_lead = min(statistics.median(self._costs), MAX_COMPUTE_LEAD)
         return reply
 
 
 _QUEUES: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, weakref.WeakSet[ServiceQueue]] = (
     weakref.WeakKeyDictionary()
 )
+#: Never aim a reply earlier than this for its computing time (s): a slow reply (a whole array)
+#: waits its full sample rather than let one outlier pull every reply early.
+MAX_COMPUTE_LEAD = 0.0005
 #: Room kept between a tick's expected end and the next reply (s).
 TICK_MARGIN = 0.0003
 #: A worker idle for less than this since its last reply expects the client's next request:

@@ -93,7 +93,8 @@ CLOSE_GRACE = 2.0
 ERROR_GRACE = 10.0
 #: Worker queue: (request, id the reply carries, request number on its connection); None =
 #: close here.
-_Item = tuple[Request, int, int] | None
+#: (request, reply id, its number on the connection, when its bytes arrived) or the end mark
+_Item = tuple[Request, int, int, float] | None
 #: Fast-path backlog: a frame, or (frame, id) with the legacy-ids quirk; None = close here.
 #: Plain frames keep a big backlog free of per-request objects for the garbage collector.
 _Frame = bytes | tuple[bytes, int] | None
@@ -213,7 +214,7 @@ class _Connection(asyncio.BufferedProtocol):
         if frames:
             self.last_rx = now
         try:
-            self._dispatch(frames, error)
+            self._dispatch(frames, error, now)
         except Exception:
             log.exception("client %d (%s): internal error, closing", self.index, self.peer)
             self.abort()
@@ -246,7 +247,9 @@ class _Connection(asyncio.BufferedProtocol):
 
     # -- request handling -----------------------------------------------------------------
 
-    def _dispatch(self, frames: list[bytes], error: ProtocolError | None) -> None:
+    def _dispatch(
+        self, frames: list[bytes], error: ProtocolError | None, arrival: float
+    ) -> None:
         emu = self.emu
         # Pre-9.0 bug: every reply to one TCP read carried the first request's id.
         legacy_id = _U16.unpack_from(frames[0])[0] if frames and emu.legacy_ids else None
@@ -271,7 +274,7 @@ class _Connection(asyncio.BufferedProtocol):
                 break
             self.received += 1
             msg_id = request.msg_id if legacy_id is None else legacy_id
-            self.queue.append((request, msg_id, self.received))
+            self.queue.append((request, msg_id, self.received, arrival))
         if error is not None:
             self.queue.append(None)  # answer what came before, then close
         self._update_reading()
@@ -344,12 +347,14 @@ class _Connection(asyncio.BufferedProtocol):
                 if item is None:
                     self._finish()
                     return
-                request, msg_id, nth = item
+                request, msg_id, nth, arrival = item
                 responder = self.responder
                 kind = responder.kind(request)
                 if emu.service is not None and kind is not None:
                     compute = partial(responder.answer, request, msg_id)
-                    reply = await emu.service.run(kind, compute, responder.weight(request))
+                    reply = await emu.service.run(
+                        kind, compute, responder.weight(request), arrival=arrival
+                    )
                 else:
                     reply = responder.answer(request, msg_id)
                 frame = encode_reply(reply)
