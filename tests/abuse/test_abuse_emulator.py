@@ -78,6 +78,12 @@ class Session:
         return result, tally, growth
 
     def check(self, result: ProbeResult, tally: AbuseTally, growth: float) -> None:
+        # the figures, for `pytest tests/abuse -s` (the closing notes quote them)
+        print(
+            f"bystander p50/p99/max {result.p50_ms:.1f}/{result.p99_ms:.1f}/{result.max_ms:.1f}"
+            f" ms over {result.requests} requests, wrong {result.wrong + tally.wrong},"
+            f" RSS growth {growth:+.1f} MB (since start {self.emu.rss_mb() - self.baseline:+.1f})"
+        )
         assert self.emu.alive()
         assert result.errors == 0 and result.wrong == 0, result.notes
         assert result.requests > 100, result
