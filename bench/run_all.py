@@ -1,7 +1,9 @@
 """Run every benchmark and regenerate the tables of docs/BENCHMARKS.md.
 
-    .venv/bin/python bench/run_all.py            # full run (~3 minutes), rewrites the doc
+    .venv/bin/python bench/run_all.py            # full run (~17 minutes), rewrites the doc
     .venv/bin/python bench/run_all.py --quick    # tiny sizes, prints only (doc untouched)
+    .venv/bin/python bench/run_all.py --only client_roundtrip.py cli_startup.py
+                                                 # re-run some; replace only their tables
 
 Each benchmark runs in its own process (``--json``); the tables between the
 ``<!-- BEGIN GENERATED -->`` / ``<!-- END GENERATED -->`` markers of docs/BENCHMARKS.md are
@@ -78,10 +80,43 @@ def table(title: str, result: dict[str, Any], command: str) -> list[str]:
     return [*out, ""]
 
 
+def _split(lines: list[str]) -> tuple[list[str], dict[str, list[str]]]:
+    """The generated text as (lines before the first table, {title: its lines})."""
+    pre: list[str] = []
+    tables: dict[str, list[str]] = {}
+    current: list[str] = pre
+    for line in lines:
+        if line.startswith("### "):
+            current = tables.setdefault(line[4:].strip(), [])
+        current.append(line)
+    return pre, tables
+
+
+def _replace_tables(old: str, new_sections: list[str], note: str) -> str:
+    """``old`` generated text with the tables of ``new_sections`` swapped in, in SCRIPTS order,
+    and ``note`` added after the header and earlier notes (the other tables keep their date)."""
+    pre, tables = _split(old.splitlines())
+    _, fresh = _split("\n".join(new_sections).splitlines())
+    tables.update(fresh)
+    while pre and not pre[-1].strip():
+        pre.pop()
+    out = [*pre, "", note, ""]  # earlier partial re-runs keep their notes above
+    for title, _ in SCRIPTS:
+        out += tables.get(title, [])
+    return "\n".join(out).rstrip("\n")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="tiny sizes; print, do not touch the doc")
     ap.add_argument("--no-doc", action="store_true", help="do not rewrite docs/BENCHMARKS.md")
+    ap.add_argument(
+        "--only",
+        nargs="+",
+        metavar="SCRIPT",
+        choices=[script for _, script in SCRIPTS],
+        help="run only these scripts and replace only their tables (the others are kept)",
+    )
     args = ap.parse_args()
     info = machine_info()
     sections: list[str] = [
@@ -90,8 +125,9 @@ def main() -> None:
         "Every figure is the median of several runs (see each script's `--repeat`).",
         "",
     ]
+    chosen = [(t, s) for t, s in SCRIPTS if not args.only or s in args.only]
     with tempfile.TemporaryDirectory() as tmp:
-        for title, script in SCRIPTS:
+        for title, script in chosen:
             out = Path(tmp) / f"{script}.json"
             cmd = [sys.executable, str(BENCH / script), "--json", str(out)]
             if args.quick:
@@ -109,7 +145,14 @@ def main() -> None:
         return
     doc = DOC.read_text() if DOC.exists() else f"# Benchmarks\n\n{BEGIN}\n{END}\n"
     head, _, rest = doc.partition(BEGIN)
-    _, _, tail = rest.partition(END)
+    old, _, tail = rest.partition(END)
+    if args.only:
+        note = (
+            f"Re-run on **{info['date']}** (load average at start {info['load']}): "
+            + ", ".join(t for t, _ in chosen)
+            + "."
+        )
+        text = _replace_tables(old.strip("\n"), sections[2:], note)
     DOC.write_text(f"{head}{BEGIN}\n{text}\n{END}{tail}")
     print(f"wrote {DOC.relative_to(ROOT)}")
 
