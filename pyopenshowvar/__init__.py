@@ -22,6 +22,9 @@ Quick start::
 
 from __future__ import annotations
 
+import importlib
+from typing import TYPE_CHECKING, Any
+
 from .client import Client, ReadResult, connect, run
 from .errors import (
     KrlValueError,
@@ -50,8 +53,17 @@ from .krl import (
     parse_value,
 )
 from .robot import PathHandshake
-from .snapshot import Snapshot, SnapshotLimits, SnapshotReading, SnapshotTornError
 from .stats import AccessStats, StatsSnapshot
+
+if TYPE_CHECKING:
+    from .snapshot import Snapshot, SnapshotLimits, SnapshotReading, SnapshotTornError
+
+#: Public names imported on first use (module ``__getattr__``), so that ``import
+#: pyopenshowvar`` costs only what reading and writing variables needs; numpy and the
+#: kinematics are imported by the code that uses them, never here.
+_LAZY = dict.fromkeys(
+    ("Snapshot", "SnapshotLimits", "SnapshotReading", "SnapshotTornError"), "snapshot"
+)
 
 __version__ = "0.1.0"
 
@@ -91,3 +103,16 @@ __all__ = [
     "parse_value",
     "run",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    source = _LAZY.get(name)
+    if source is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{source}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_LAZY})

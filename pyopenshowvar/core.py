@@ -7,16 +7,19 @@
 * Operations: robot helpers (:mod:`pyopenshowvar.robot`) are written once as generators that
   yield the calls they need (``("read", args, kwargs)``, ``("sleep", (seconds,), {})``) and
   receive the results; :func:`as_async_method` and :func:`as_sync_method` turn one into a
-  method of either client, keeping its signature and docstring.
+  method of either client, keeping its signature and docstring. :class:`LazyOps` and
+  :class:`LazyMethod` do the same for a module of operations imported on first use only.
 """
 
 from __future__ import annotations
 
 import asyncio
+import importlib
 import threading
 import time
 from collections.abc import Callable, Coroutine, Generator, Iterable, Sequence
 from dataclasses import dataclass
+from types import MethodType
 from typing import Any, Concatenate, ParamSpec, TypeVar
 
 from .errors import (
@@ -33,7 +36,17 @@ from .protocol import Reply, encode_read
 from .session import IdPolicy, check_id_policy
 from .stats import AccessStats
 
-__all__ = ["ClientCore", "Op", "ReadResult", "as_async_method", "as_sync_method"]
+__all__ = [
+    "ClientCore",
+    "LazyMethod",
+    "LazyOps",
+    "Op",
+    "ReadResult",
+    "as_async_method",
+    "as_sync_method",
+    "lazy_async_method",
+    "lazy_sync_method",
+]
 
 P = ParamSpec("P")
 T = TypeVar("T")
@@ -281,3 +294,56 @@ def _copy_identity(method: Callable[..., Any], op: Callable[..., Any]) -> None:
     method.__qualname__ = op.__qualname__
     method.__doc__ = op.__doc__
     method.__module__ = op.__module__
+
+
+class LazyOps:
+    """Stands for a module of operations that is imported when one of them is first used.
+
+    ``LazyOps("pyopenshowvar.c3.ops").read_multiple`` names the operation without importing
+    anything; :class:`LazyMethod` imports it when the method is first looked up. The clients
+    have dozens of C3 Bridge methods whose codec most programs (``kvp read``) never touch.
+    """
+
+    def __init__(self, module: str) -> None:
+        self._module = module
+
+    def __getattr__(self, name: str) -> tuple[str, str]:
+        if name.startswith("__"):  # copy, pickle and friends probe dunders
+            raise AttributeError(name)
+        return self._module, name
+
+
+class LazyMethod:
+    """A client method made by ``wrap`` (:func:`as_async_method`...) from a lazy operation.
+
+    The first lookup, on the class or an instance, imports the operation's module and puts the
+    real method on the class in place of this placeholder, so later calls cost nothing extra
+    and ``help()``, ``inspect.signature`` and docstrings see the method itself.
+    """
+
+    def __init__(
+        self, op: tuple[str, str], wrap: Callable[[Callable[..., Op[Any]]], Callable[..., Any]]
+    ) -> None:
+        self._module, self._op = op
+        self._wrap = wrap
+        self._owner: type | None = None
+        self._name = self._op
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self._owner, self._name = owner, name
+
+    def __get__(self, obj: object, objtype: type | None = None) -> Any:
+        method = self._wrap(getattr(importlib.import_module(self._module), self._op))
+        if self._owner is not None:
+            setattr(self._owner, self._name, method)
+        return method if obj is None else MethodType(method, obj)
+
+
+def lazy_async_method(op: tuple[str, str]) -> LazyMethod:
+    """:func:`as_async_method` of a :class:`LazyOps` operation, made on first use."""
+    return LazyMethod(op, as_async_method)
+
+
+def lazy_sync_method(op: tuple[str, str]) -> LazyMethod:
+    """:func:`as_sync_method` of a :class:`LazyOps` operation, made on first use."""
+    return LazyMethod(op, as_sync_method)

@@ -18,24 +18,43 @@ asyncio :class:`~pyopenshowvar.client.Client` and the blocking :class:`pyopensho
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeAlias, cast
 
-import numpy as np
-import numpy.typing as npt
-
-from .core import Call, Op, as_async_method, as_sync_method
+from .core import (
+    Call,
+    LazyOps,
+    Op,
+    as_async_method,
+    as_sync_method,
+    lazy_async_method,
+    lazy_sync_method,
+)
 from .errors import KrlValueError, KvpTimeoutError, UnknownVariableError
 from .krl import E6Axis, E6Pos, KrlValue, Struct, parse_array, parse_value
-from .snapshot import read_snapshot
 
 __all__ = ["PathHandshake", "RobotHelpers", "SyncRobotHelpers"]
 
 log = logging.getLogger(__name__)
 
-FloatArray = npt.NDArray[np.float64]
+if TYPE_CHECKING:
+    import numpy as np
+    import numpy.typing as npt
+
+    from . import snapshot as _snapshot
+
+    _lazy_async, _lazy_sync = as_async_method, as_sync_method
+else:
+    # the snapshot layout code is imported when read_snapshot is first used
+    _snapshot = LazyOps(f"{__package__}.snapshot")
+    _lazy_async, _lazy_sync = lazy_async_method, lazy_sync_method
+
+# numpy is imported by the helpers that return arrays, not here: a client that only reads and
+# writes variables (``kvp read``) never loads it
+FloatArray: TypeAlias = "npt.NDArray[np.float64]"
 
 _AXES = ("A1", "A2", "A3", "A4", "A5", "A6")
 _CART = ("X", "Y", "Z", "A", "B", "C")
@@ -94,14 +113,14 @@ def read_joint_torques(io: Any, *, timeout: float | None = None) -> Op[FloatArra
             values = parse_array((yield _read("$TORQUE_AXIS_ACT[]", timeout)), "REAL")
             if len(values) >= 6:
                 io._torque_whole_array = True
-                return np.asarray(values[:6], dtype=np.float64)
+                return _float_array(cast("list[float]", values[:6]))
         except (UnknownVariableError, KrlValueError):
             pass
         log.info("%s cannot read $TORQUE_AXIS_ACT[] whole; using element reads", io.endpoint)
         io._torque_whole_array = False
     names = [f"$TORQUE_AXIS_ACT[{i}]" for i in range(1, 7)]
     results = yield ("read_many", (names,), {"timeout": timeout})
-    return np.asarray([_real(parse_value(results[n].unwrap(), "REAL")) for n in names])
+    return _float_array([_real(parse_value(results[n].unwrap(), "REAL")) for n in names])
 
 
 def write_joint_path(
@@ -227,7 +246,7 @@ class RobotHelpers:
     set_output = as_async_method(set_output)
     set_outputs = as_async_method(set_outputs)
     read_output = as_async_method(read_output)
-    read_snapshot = as_async_method(read_snapshot)
+    read_snapshot = _lazy_async(_snapshot.read_snapshot)
 
 
 class SyncRobotHelpers:
@@ -242,7 +261,7 @@ class SyncRobotHelpers:
     set_output = as_sync_method(set_output)
     set_outputs = as_sync_method(set_outputs)
     read_output = as_sync_method(read_output)
-    read_snapshot = as_sync_method(read_snapshot)
+    read_snapshot = _lazy_sync(_snapshot.read_snapshot)
 
 
 def _real(value: KrlValue) -> float:
@@ -259,13 +278,19 @@ def _partial(keys: Sequence[str], point: Sequence[float] | Any) -> Struct:
     values = [float(v) for v in point]
     if len(values) != len(keys):
         raise ValueError(f"expected {len(keys)} values ({' '.join(keys)}), got {len(values)}")
-    if not all(np.isfinite(values)):
+    if not all(math.isfinite(v) for v in values):
         raise ValueError(f"path point contains NaN or infinity: {values}")
     return Struct(None, dict(zip(keys, values, strict=True)))
 
 
 def _members_array(value: Struct, keys: Sequence[str], name: str, endpoint: str) -> FloatArray:
     try:
-        return np.asarray([_real(value[k]) for k in keys], dtype=np.float64)
+        return _float_array([_real(value[k]) for k in keys])
     except (KeyError, TypeError) as exc:
         raise KrlValueError(f"{name!r} on {endpoint} lacks a member: {exc}") from exc
+
+
+def _float_array(values: Sequence[float]) -> FloatArray:
+    import numpy as np
+
+    return np.asarray(values, dtype=np.float64)

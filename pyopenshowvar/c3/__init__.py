@@ -19,22 +19,74 @@ See docs/c3bridge.md.
 
 from __future__ import annotations
 
-from .constants import (
-    Command,
-    CopyFlag,
-    ErrorCode,
-    Interpreter,
-    ItemAttribute,
-    ItemType,
-    KcpKey,
-    MotionType,
-    ProgramCommand,
-)
-from .errors import C3CommandError, MotionNotAllowedError, RequestTooLargeError, UnsupportedError
-from .files import NameList, Properties
-from .ops_programs import ProgramState
-from .replies import BenchmarkReply, ProxyInfoReply
-from .server import ServerInfo
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .constants import (
+        Command,
+        CopyFlag,
+        ErrorCode,
+        Interpreter,
+        ItemAttribute,
+        ItemType,
+        KcpKey,
+        MotionType,
+        ProgramCommand,
+    )
+    from .errors import (
+        C3CommandError,
+        MotionNotAllowedError,
+        RequestTooLargeError,
+        UnsupportedError,
+    )
+    from .files import NameList, Properties
+    from .ops_programs import ProgramState
+    from .replies import BenchmarkReply, ProxyInfoReply
+    from .server import ServerInfo
+
+#: Where each public name lives. They are imported on first use (module ``__getattr__``), so
+#: importing the client, which imports :mod:`.api` and so this package, loads no C3 codec.
+_SOURCES = {
+    **dict.fromkeys(
+        (
+            "Command",
+            "CopyFlag",
+            "ErrorCode",
+            "Interpreter",
+            "ItemAttribute",
+            "ItemType",
+            "KcpKey",
+            "MotionType",
+            "ProgramCommand",
+        ),
+        "constants",
+    ),
+    **dict.fromkeys(
+        ("C3CommandError", "MotionNotAllowedError", "RequestTooLargeError", "UnsupportedError"),
+        "errors",
+    ),
+    "NameList": "files",
+    "Properties": "files",
+    "ProgramState": "ops_programs",
+    "BenchmarkReply": "replies",
+    "ProxyInfoReply": "replies",
+    "ServerInfo": "server",
+}
+
+
+def __getattr__(name: str) -> Any:
+    source = _SOURCES.get(name)
+    if source is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{source}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_SOURCES})
+
 
 __all__ = [
     "BenchmarkReply",

@@ -13,12 +13,11 @@ Both are locale independent and both round-trip through :func:`~.parse.parse_val
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-
-import numpy as np
+from typing import SupportsFloat, SupportsInt, cast
 
 from ..errors import KrlValueError
 from .numfmt import format_real_krc4, format_real_shortest
-from .types import KrlEnum, KrlValue, Struct
+from .types import KrlEnum, KrlValue, Struct, scalar_types
 
 __all__ = ["format_krc4", "format_real_krc4", "format_value"]
 
@@ -35,13 +34,14 @@ def _text(v: str) -> str:
 
 
 def _fmt(v: object, real: Callable[[float], str], krc4: bool, in_list: bool = False) -> str:
+    bools, ints, reals = scalar_types()  # numpy's scalars too, once numpy is loaded
     # bool before int: bool is an int subclass
-    if isinstance(v, bool | np.bool_):
+    if isinstance(v, bools):
         return "TRUE" if v else "FALSE"
-    if isinstance(v, int | np.integer):
-        return str(int(v))
-    if isinstance(v, float | np.floating):
-        return real(float(v))
+    if isinstance(v, ints):
+        return str(int(cast(SupportsInt, v)))
+    if isinstance(v, reals):
+        return real(float(cast(SupportsFloat, v)))
     if isinstance(v, str):
         return _text(v)
     if isinstance(v, KrlEnum):

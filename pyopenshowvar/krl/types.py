@@ -16,14 +16,26 @@ from __future__ import annotations
 
 import math
 import re
+import sys
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
-from typing import Any, ClassVar, Generic, Self, TypeAlias, TypeVar, cast, overload
-
-import numpy as np
-import numpy.typing as npt
+from typing import (
+    TYPE_CHECKING,
+    Any,
+    ClassVar,
+    Generic,
+    Self,
+    TypeAlias,
+    TypeVar,
+    cast,
+    overload,
+)
 
 from ..errors import KrlValueError
+
+if TYPE_CHECKING:
+    import numpy as np
+    import numpy.typing as npt
 
 __all__ = [
     "TYPED_STRUCTS",
@@ -36,6 +48,37 @@ __all__ = [
     "Pos",
     "Struct",
 ]
+
+#: (bool types, int types, real types) a KRL scalar may come as: Python's own, plus numpy's
+#: scalars once numpy is loaded (see :func:`scalar_types`).
+ScalarTypes: TypeAlias = tuple[tuple[type, ...], tuple[type, ...], tuple[type, ...]]
+_PLAIN_SCALARS: ScalarTypes = ((bool,), (int,), (float,))
+_numpy_scalars: ScalarTypes | None = None
+
+
+def scalar_types() -> ScalarTypes:
+    """The Python and (when loaded) numpy scalar types, for isinstance checks.
+
+    A numpy scalar can only exist once numpy is imported, so looking in ``sys.modules``
+    instead of importing numpy here gives the same answers and keeps numpy out of processes
+    that never use it: ``kvp read`` starts without paying for numpy's import.
+    """
+    global _numpy_scalars
+    if _numpy_scalars is not None:
+        return _numpy_scalars
+    np_module = sys.modules.get("numpy")
+    try:
+        if np_module is None:
+            return _PLAIN_SCALARS
+        _numpy_scalars = (
+            (bool, np_module.bool_),
+            (int, np_module.integer),
+            (float, np_module.floating),
+        )
+    except AttributeError:  # numpy is half-way through its own import (another thread)
+        return _PLAIN_SCALARS
+    return _numpy_scalars
+
 
 _IDENT = re.compile(r"[A-Za-z_$][A-Za-z0-9_$]*\Z", re.ASCII)
 
@@ -253,7 +296,7 @@ class _Member(Generic[_T]):
 
 _Real = _Member[float]
 _Int = _Member[int]
-_Number = float | int | np.integer[Any] | np.floating[Any]
+_Number: TypeAlias = "float | int | np.integer[Any] | np.floating[Any]"
 
 
 class _TypedStruct(Struct):
@@ -289,15 +332,15 @@ class _TypedStruct(Struct):
 
     @classmethod
     def _coerce(cls, key: str, v: object) -> float | int:
-        if isinstance(v, bool | np.bool_) or not isinstance(
-            v, int | float | np.integer | np.floating
-        ):
+        bools, ints, reals = scalar_types()
+        if isinstance(v, bools) or not isinstance(v, ints + reals):
             raise KrlValueError(f"{cls.TYPE_NAME}.{key} must be a number, not {v!r}")
+        number = cast("float", v)  # a Python or numpy int or float, checked just above
         if key in cls.INT_MEMBERS:
-            if not math.isfinite(v) or int(v) != v:
+            if not math.isfinite(number) or int(number) != number:
                 raise KrlValueError(f"{cls.TYPE_NAME}.{key} must be an integer, not {v!r}")
-            return int(v)
-        f = float(v)
+            return int(number)
+        f = float(number)
         if not math.isfinite(f):
             raise KrlValueError(f"{cls.TYPE_NAME}.{key} must be finite, not {v!r}")
         return f
@@ -326,12 +369,16 @@ class _TypedStruct(Struct):
         missing = [n for n in names if n not in self._members]
         if missing:
             raise KrlValueError(f"{self.TYPE_NAME} value lacks {', '.join(missing)}: {self!r}")
+        import numpy as np  # numpy only for the numpy conversions (kvp read starts faster)
+
         return np.array([self._members[n] for n in names], dtype=np.float64)
 
     @classmethod
     def from_numpy(cls, arr: npt.ArrayLike, **extra: _Number | None) -> Self:
         """Build from 6 main values (or 12 = main + E1..E6 for E6 types); ``extra`` adds
         members by keyword, e.g. ``Pos.from_numpy(xyzabc, s=2, t=2)``."""
+        import numpy as np
+
         a = np.asarray(arr, dtype=np.float64)
         n_main, n_all = len(cls.MAIN), len(cls.MAIN) + len(cls.EXTERNAL)
         if a.ndim != 1 or a.shape[0] not in {n_main, n_all}:
