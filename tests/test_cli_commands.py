@@ -4,35 +4,38 @@ from __future__ import annotations
 
 import typer
 from pyopenshowvar_apps.cli import app
-from pyopenshowvar_apps.commands import command_modules, register_all
-from typer.main import get_command
+from pyopenshowvar_apps.commands import LazyCommands, build_group, command_modules, register_all
+from typer.main import get_command, get_group
 
 
-def _names(a: typer.Typer) -> list[str]:
-    """Commands and command groups (``kvp program start``: the group ``program``)."""
-    groups = [
-        g.name or (g.typer_instance.info.name if g.typer_instance else "") or ""
-        for g in a.registered_groups
-    ]
-    return [c.name or "" for c in a.registered_commands] + groups
-
-
-def test_every_group_module_registers_commands_in_order() -> None:
+def test_every_group_module_declares_what_it_registers_in_order() -> None:
     modules = command_modules()
     orders = [getattr(m, "ORDER", 50) for m in modules]
     assert orders == sorted(orders)
     seen: list[str] = []
     for module in modules:
-        one = typer.Typer()
-        module.register(one)
-        assert _names(one), f"{module.__name__} registers nothing"
-        seen += _names(one)
+        built = build_group(module, rich_markup_mode=None)
+        assert built, f"{module.__name__} registers nothing"
+        # the lazy group finds a command by these names without running register()
+        assert sorted(built) == sorted(module.COMMANDS), module.__name__
+        seen += built
     assert len(seen) == len(set(seen)), "two groups register the same command name"
-    fresh = typer.Typer()
-    register_all(fresh)
-    # commands keep the modules' order; groups (typer lists them after the commands) too
-    assert set(_names(fresh)) == set(seen) == set(_names(app))
-    commands = [c.name for c in fresh.registered_commands]
-    assert commands == [n for n in seen if n in commands]
     assert {"read", "write", "watch", "repl", "monitor", "emu", "program", "files"} <= set(seen)
-    assert set(get_command(app).list_commands(None)) == set(seen)  # type: ignore[attr-defined,arg-type]
+
+
+def test_the_lazy_group_lists_what_an_eager_one_would() -> None:
+    fresh = typer.Typer(rich_markup_mode=None)
+    register_all(fresh)
+    eager = list(get_group(fresh).commands)  # commands in module order, then the groups
+    group = get_command(app)
+    assert group.list_commands(None) == eager  # type: ignore[attr-defined,arg-type]
+    assert list(LazyCommands(rich_markup_mode=None)) == eager
+
+
+def test_a_lookup_builds_only_its_own_group() -> None:
+    lazy = LazyCommands(rich_markup_mode=None)
+    assert "read" in lazy and "nosuchcommand" not in lazy
+    assert lazy["read"].name == "read"
+    assert set(lazy._loaded) == {"pyopenshowvar_apps.commands.variables"}
+    assert lazy.get("nosuchcommand") is None
+    assert len(lazy) == len(list(lazy))

@@ -2,8 +2,9 @@
 
 Only the global options live here. Each subcommand group is a module of
 :mod:`pyopenshowvar_apps.commands` with a ``register(app)`` function, found automatically (add
-a command by adding a module there); the heavy imports (the REPL's prompt_toolkit, the
-monitor's Textual) happen only when their command runs, so ``kvp read`` starts fast.
+a command by adding a module there). The group is lazy (:class:`~.commands.LazyCommands`):
+``kvp read`` builds and imports the ``read`` command only, never the case studies, the
+monitor's Textual, the web stack or numpy, so a shell loop of ``kvp read`` starts fast.
 
 Exit codes (also in ``kvp --help``) let shell scripts react precisely:
 
@@ -32,7 +33,7 @@ from typing import Annotated, Any
 import typer
 from typer.core import TyperGroup
 
-from pyopenshowvar_apps.commands import register_all
+from pyopenshowvar_apps.commands import LazyCommands
 from pyopenshowvar_apps.common import (
     EXIT_BUG,
     EXIT_CONNECTION,
@@ -50,6 +51,7 @@ from pyopenshowvar_apps.common import (
     stop_embedded_emulator,
     to_jsonable,
 )
+from pyopenshowvar_apps.fastparams import speed_up
 
 __all__ = [
     "EXIT_CONNECTION",
@@ -128,13 +130,24 @@ GLOBAL_EPILOG = (
 
 
 class KvpGroup(TyperGroup):
-    """The ``kvp`` group: global options are accepted after the subcommand too."""
+    """The ``kvp`` group: subcommands built on first use; global options also after them."""
+
+    def __init__(self, **kw: Any) -> None:
+        super().__init__(**kw)
+        # the commands are built with the app's settings, as typer builds an eager group's
+        settings = {"rich_markup_mode": self.rich_markup_mode}
+        if hasattr(self, "suggest_commands"):  # typer >= 0.16
+            settings["suggest_commands"] = self.suggest_commands
+        lazy = LazyCommands(**settings)
+        lazy.update(self.commands)  # commands added to ``app`` directly, if any
+        self.commands = lazy
+        speed_up(self)
 
     def get_command(self, ctx: Any, cmd_name: str) -> Any:
         command = super().get_command(ctx, cmd_name)
         if command is not None and _own_options(command) is not None and not command.epilog:
             command.epilog = GLOBAL_EPILOG
-        return command
+        return speed_up(command)
 
     def parse_args(self, ctx: Any, args: list[str]) -> list[str]:
         index = _command_index(args)
@@ -226,9 +239,6 @@ def _global(
     Opts.reset(host, port, timeout, emulate)
     Opts.plant = plant
     ctx.call_on_close(stop_embedded_emulator)
-
-
-register_all(app)
 
 
 def main() -> None:

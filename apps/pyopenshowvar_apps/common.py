@@ -51,6 +51,14 @@ EXIT_PROTOCOL = 6
 EXIT_STOPPED = 7
 EXIT_INTERRUPTED = 130
 
+#: Seconds a write is watched for a program stop (a few interpolation cycles of 12 ms; the
+#: emulator stops a PTP beyond a software limit within two of them). Here, not in
+#: :mod:`.writecheck`, so the ``kvp write`` signature does not import it for ``kvp read``.
+STOP_WINDOW = 0.2
+STOP_WINDOW_HELP = (
+    "Seconds to watch $PRO_STATE1/$STOPMESS for a program stop after a write (0: do not watch)."
+)
+
 T = TypeVar("T")
 
 

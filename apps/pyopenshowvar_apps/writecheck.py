@@ -35,6 +35,7 @@ from pyopenshowvar import (
     parse_value,
 )
 from pyopenshowvar.errors import KrlValueError
+from pyopenshowvar_apps.common import STOP_WINDOW, STOP_WINDOW_HELP
 
 __all__ = [
     "STOP_WINDOW",
@@ -49,12 +50,6 @@ __all__ = [
     "read_program_state",
 ]
 
-#: Seconds a write is watched for a program stop (a few interpolation cycles of 12 ms; the
-#: emulator stops a PTP beyond a software limit within two of them).
-STOP_WINDOW = 0.2
-STOP_WINDOW_HELP = (
-    "Seconds to watch $PRO_STATE1/$STOPMESS for a program stop after a write (0: do not watch)."
-)
 #: Poll period of that watch: one interpolation cycle.
 STOP_POLL = 0.012
 STATE_NAMES = ("$PRO_STATE1", "$STOPMESS", "$EMU_MESSAGE[]")

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import typer
 
-from pyopenshowvar_apps import bench
-
 ORDER = 30
+COMMANDS = ("bench",)
 
 
 def register(app: typer.Typer) -> None:
+    from pyopenshowvar_apps import bench
+
     app.command("bench")(bench.bench)

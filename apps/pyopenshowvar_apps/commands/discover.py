@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import typer
 
-from pyopenshowvar_apps import discover
-
 ORDER = 40
+COMMANDS = ("discover",)
 
 
 def register(app: typer.Typer) -> None:
+    from pyopenshowvar_apps import discover
+
     app.command("discover")(discover.discover)

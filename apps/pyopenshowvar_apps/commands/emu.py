@@ -9,6 +9,7 @@ from __future__ import annotations
 import typer
 
 ORDER = 90
+COMMANDS = ("emu",)
 
 
 def emu(ctx: typer.Context) -> None:

@@ -24,6 +24,7 @@ from pyopenshowvar_apps.c3cli import run_c3
 from pyopenshowvar_apps.common import EXIT_USAGE, fail
 
 ORDER = 36
+COMMANDS = ("files",)
 #: Largest file ``put`` sends and ``get`` accepts by default.
 MAX_FILE = 16 * 1024 * 1024
 

@@ -26,6 +26,7 @@ if TYPE_CHECKING:
     from pyopenshowvar_apps.gateway.server import Gateway
 
 ORDER = 70
+COMMANDS = ("gateway",)
 
 
 def gateway(

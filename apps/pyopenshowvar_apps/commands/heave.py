@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import typer
 
-from pyopenshowvar_apps.heave import cli
-
 ORDER = 65
+COMMANDS = ("heave", "platform")
 
 
 def register(app: typer.Typer) -> None:
+    from pyopenshowvar_apps.heave import cli
+
     cli.register(app)

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import typer
 
-from pyopenshowvar_apps import sessions
-
 ORDER = 50
+COMMANDS = ("repl", "monitor")
 
 
 def register(app: typer.Typer) -> None:
+    from pyopenshowvar_apps import sessions
+
     app.command("repl")(sessions.repl)
     app.command("monitor")(sessions.monitor)

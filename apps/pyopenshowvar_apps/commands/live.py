@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import typer
 
-from pyopenshowvar_apps import live
-
 ORDER = 20
+COMMANDS = ("watch", "record")
 
 
 def register(app: typer.Typer) -> None:
+    from pyopenshowvar_apps import live
+
     app.command("watch")(live.watch)
     app.command("record")(live.record)

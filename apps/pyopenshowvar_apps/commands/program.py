@@ -25,6 +25,7 @@ from pyopenshowvar_apps.c3cli import run_c3
 from pyopenshowvar_apps.common import EXIT_USAGE, fail
 
 ORDER = 35
+COMMANDS = ("program",)
 
 program_app = typer.Typer(
     name="program",

@@ -17,6 +17,7 @@ import typer
 from pyopenshowvar_apps.common import EXIT_USAGE, fail, run, to_jsonable
 
 ORDER = 15
+COMMANDS = ("snapshot",)
 
 snapshot_app = typer.Typer(
     help="Consistent snapshots: KRL that copies many variables in one SPS pass, read in one"

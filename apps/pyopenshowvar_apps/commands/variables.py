@@ -11,20 +11,17 @@ from pyopenshowvar import Client
 from pyopenshowvar_apps.common import (
     EXIT_STOPPED,
     EXIT_USAGE,
+    STOP_WINDOW,
+    STOP_WINDOW_HELP,
     Opts,
     check_window,
     fail,
     run,
     to_jsonable,
 )
-from pyopenshowvar_apps.writecheck import (
-    STOP_WINDOW,
-    STOP_WINDOW_HELP,
-    check_literal,
-    checked_write,
-)
 
 ORDER = 10
+COMMANDS = ("read", "write")
 
 
 def read(
@@ -66,6 +63,8 @@ def write(
     The literal is checked before it is sent; a refusal says its likely reason; a write that
     stops the running robot program (e.g. beyond a software limit) is reported, exit code 7.
     """
+    from pyopenshowvar_apps.writecheck import check_literal, checked_write
+
     if not no_check and (problem := check_literal(value)) is not None:
         lines = problem.lines(value)
         fail(EXIT_USAGE, "\n".join([f"{value!r} is not a KRL literal: {lines[0]}", *lines[1:]]))

@@ -5,10 +5,11 @@ from __future__ import annotations
 
 import typer
 
-from pyopenshowvar_apps.web import command
-
 ORDER = 55
+COMMANDS = ("web",)
 
 
 def register(app: typer.Typer) -> None:
+    from pyopenshowvar_apps.web import command
+
     app.command("web")(command.web)
