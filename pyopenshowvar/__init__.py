@@ -25,7 +25,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-from .client import Client, ReadResult, connect, run
+from .core import ReadResult
 from .errors import (
     KrlValueError,
     KvpConnectionError,
@@ -56,14 +56,21 @@ from .robot import PathHandshake
 from .stats import AccessStats, StatsSnapshot
 
 if TYPE_CHECKING:
+    from .client import Client, connect, run
     from .snapshot import Snapshot, SnapshotLimits, SnapshotReading, SnapshotTornError
 
 #: Public names imported on first use (module ``__getattr__``), so that ``import
-#: pyopenshowvar`` costs only what reading and writing variables needs; numpy and the
-#: kinematics are imported by the code that uses them, never here.
-_LAZY = dict.fromkeys(
-    ("Snapshot", "SnapshotLimits", "SnapshotReading", "SnapshotTornError"), "snapshot"
-)
+#: pyopenshowvar`` costs only what reading and writing variables needs: the asyncio client (and
+#: asyncio) is not loaded by a program that uses the blocking one (``pyopenshowvar.sync``, ``kvp
+#: read``); numpy and the kinematics are imported by the code that uses them, never here.
+_LAZY = {
+    "Client": "client",
+    "connect": "client",
+    "run": "client",
+    **dict.fromkeys(
+        ("Snapshot", "SnapshotLimits", "SnapshotReading", "SnapshotTornError"), "snapshot"
+    ),
+}
 
 __version__ = "0.1.0"
 

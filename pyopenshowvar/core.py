@@ -13,7 +13,6 @@
 
 from __future__ import annotations
 
-import asyncio
 import importlib
 import threading
 import time
@@ -247,6 +246,8 @@ def as_async_method(
     """A coroutine method of the asyncio client that runs ``op``."""
 
     async def method(self: Any, /, *args: P.args, **kwargs: P.kwargs) -> T:
+        import asyncio  # here, not at module level: the blocking client never loads asyncio
+
         gen = op(self, *args, **kwargs)
         done, item = _advance(gen, None, None)
         while not done:

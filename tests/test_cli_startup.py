@@ -18,7 +18,8 @@ import pytest
 #: Modules ``kvp read`` used to import and must not again: numpy (through the KRL value types
 #: and the robot helpers), rich (through the case studies' summary table), pydantic (typer's
 #: conversion of option values, see pyopenshowvar_apps.fastparams), the C3 Bridge codec, the
-#: snapshot layout, and the implementations of the other commands.
+#: snapshot layout, and the implementations of the other commands. ``kvp read`` (the blocking
+#: client) also runs without asyncio.
 HEAVY = (
     "numpy",
     "rich",
@@ -54,9 +55,9 @@ finally:
 """
 
 
-def _probe(*argv: str) -> tuple[list[str], dict[str, Any]]:
+def _probe(heavy: list[str], *argv: str) -> tuple[list[str], dict[str, Any]]:
     proc = subprocess.run(
-        [sys.executable, "-c", _PROBE, json.dumps(HEAVY), *argv],
+        [sys.executable, "-c", _PROBE, json.dumps(heavy), *argv],
         capture_output=True,
         text=True,
         timeout=60,
@@ -68,18 +69,19 @@ def _probe(*argv: str) -> tuple[list[str], dict[str, Any]]:
 
 
 @pytest.mark.parametrize(
-    ("argv", "output"),
+    ("argv", "output", "no_asyncio"),
     [
-        (["read", "$OV_PRO"], ["100"]),
-        (["write", "$OV_PRO", "50", "--stop-window", "0"], ["50"]),
-        (["discover", "--help"], None),
+        (["read", "$OV_PRO"], ["100"], True),  # the blocking client: no event loop
+        (["write", "$OV_PRO", "50", "--stop-window", "0"], ["50"], False),
+        (["discover", "--help"], None, True),
     ],
     ids=["read", "write", "discover-help"],
 )
 def test_common_commands_import_no_heavy_module(
-    emulator_thread: Any, argv: list[str], output: list[str] | None
+    emulator_thread: Any, argv: list[str], output: list[str] | None, no_asyncio: bool
 ) -> None:
-    printed, report = _probe("--port", str(emulator_thread.port), *argv)
+    heavy = [*HEAVY, "asyncio"] if no_asyncio else list(HEAVY)
+    printed, report = _probe(heavy, "--port", str(emulator_thread.port), *argv)
     assert report["code"] in (0, None), printed
     if output is not None:
         assert printed == output
@@ -90,6 +92,6 @@ def test_common_commands_import_no_heavy_module(
 
 def test_the_probe_sees_a_heavy_import() -> None:
     # the check above can fail: the full help builds every command, the case studies too
-    _, report = _probe("--help")
+    _, report = _probe(list(HEAVY), "--help")
     assert "pyopenshowvar_apps.demo" in report["loaded"]
     assert "rich" in report["loaded"]

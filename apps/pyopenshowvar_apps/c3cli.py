@@ -9,11 +9,10 @@ or file over a limit) is 2. ``--emulate`` starts an embedded emulator that speak
 
 from __future__ import annotations
 
-import asyncio
 from collections.abc import Awaitable, Callable
-from typing import TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
-from pyopenshowvar import Client, KvpError
+from pyopenshowvar import KvpError
 from pyopenshowvar_apps.common import (
     EXIT_PROTOCOL,
     EXIT_USAGE,
@@ -23,6 +22,9 @@ from pyopenshowvar_apps.common import (
     fail_for,
     make_client,
 )
+
+if TYPE_CHECKING:
+    from pyopenshowvar import Client
 
 __all__ = ["run_c3", "start_c3_emulator"]
 
@@ -44,6 +46,8 @@ def start_c3_emulator() -> None:
 
 def run_c3(job: Callable[[Client], Awaitable[T]]) -> T:
     """Run ``job`` with a connected client; C3 errors and library errors become one line."""
+    import asyncio
+
     from pyopenshowvar.c3 import (
         C3CommandError,
         MotionNotAllowedError,

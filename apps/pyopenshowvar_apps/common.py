@@ -20,16 +20,14 @@ This module must stay cheap to import: ``kvp read`` is on the hot path of shell 
 
 from __future__ import annotations
 
-import asyncio
 import math
 from collections.abc import Awaitable, Callable, Sequence
 from pathlib import Path
-from typing import Any, NoReturn, TypeVar
+from typing import TYPE_CHECKING, Any, NoReturn, TypeVar
 
 import typer
 
 from pyopenshowvar import (
-    Client,
     KrlEnum,
     KvpConnectionError,
     KvpError,
@@ -40,6 +38,9 @@ from pyopenshowvar import (
     WriteRefusedError,
 )
 from pyopenshowvar.errors import KrlValueError, ReadFailedError
+
+if TYPE_CHECKING:
+    from pyopenshowvar import Client, sync
 
 EXIT_OK = 0
 EXIT_BUG = 1  # an unexpected exception reached the entry point: a bug, reported in one line
@@ -208,6 +209,8 @@ def fail_for(exc: BaseException) -> NoReturn:
 
 def make_client(**kw: Any) -> Client:
     """A client for the global host/port/timeout (no keep-alive unless asked)."""
+    from pyopenshowvar import Client
+
     kw.setdefault("keepalive", None)
     host, port = Opts.endpoint()
     return Client(host, port, timeout=Opts.timeout, **kw)
@@ -220,8 +223,26 @@ def run(job: Callable[[Client], Awaitable[T]], **client_kw: Any) -> T:
         async with make_client(**client_kw) as kvp:
             return await job(kvp)
 
+    import asyncio  # not at module level: kvp read runs without it (run_blocking)
+
     try:
         return asyncio.run(main())
+    except KvpError as exc:
+        fail_for(exc)
+
+
+def run_blocking(job: Callable[[sync.Client], T]) -> T:
+    """:func:`run` with the blocking client: for one-shot commands (``kvp read``).
+
+    Same endpoint, timeout, exceptions and exit codes; no event loop, so the command does not
+    pay for importing asyncio (a shell loop of ``kvp read`` pays every import on every call).
+    """
+    from pyopenshowvar import sync
+
+    host, port = Opts.endpoint()
+    try:
+        with sync.Client(host, port, timeout=Opts.timeout, keepalive=None) as kvp:
+            return job(kvp)
     except KvpError as exc:
         fail_for(exc)
 

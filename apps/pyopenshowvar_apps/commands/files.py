@@ -15,13 +15,15 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from pyopenshowvar import Client
 from pyopenshowvar_apps.c3cli import run_c3
 from pyopenshowvar_apps.common import EXIT_USAGE, fail
+
+if TYPE_CHECKING:
+    from pyopenshowvar import Client
 
 ORDER = 36
 COMMANDS = ("files",)

@@ -10,7 +10,6 @@ cell file's ``[security]`` users.
 
 from __future__ import annotations
 
-import asyncio
 import gc
 import logging
 import signal
@@ -64,6 +63,8 @@ def gateway(
     logging.basicConfig(level=level, stream=sys.stderr, format="%(asctime)s %(name)s: %(message)s")
     # asyncua logs every session and request at INFO; its warnings and errors still show.
     logging.getLogger("asyncua").setLevel(max(level, logging.WARNING))
+    import asyncio  # here: every kvp call imports this module (kvp read runs without asyncio)
+
     try:
         asyncio.run(_serve(Gateway(config)))
     except OSError as exc:
@@ -71,6 +72,8 @@ def gateway(
 
 
 async def _serve(gw: Gateway) -> None:
+    import asyncio
+
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):

@@ -16,13 +16,15 @@ from __future__ import annotations
 import json
 from dataclasses import asdict
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from pyopenshowvar import Client
 from pyopenshowvar_apps.c3cli import run_c3
 from pyopenshowvar_apps.common import EXIT_USAGE, fail
+
+if TYPE_CHECKING:
+    from pyopenshowvar import Client
 
 ORDER = 35
 COMMANDS = ("program",)
