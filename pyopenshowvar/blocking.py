@@ -8,6 +8,9 @@ loop, no thread per call. A lock makes one connection safe to share between thre
 Timeouts are kernel socket timeouts (``SO_RCVTIMEO``/``SO_SNDTIMEO``), set only when the
 call's timeout changes, so a serial read costs one ``send`` and one ``recv`` system call, as in
 the plainest client; Python's own socket timeouts would add a ``poll`` to every call.
+A serial read on an idle connection (:meth:`BlockingConnection.read_text`) is checked and
+returned straight from its one recv when its reply comes whole and alone; any other case falls
+back to the queue, the decoder and the general matching rules.
 Keep-alive, when enabled, is a daemon thread that pings only while the connection is idle and
 nobody else holds it.
 """
@@ -24,7 +27,7 @@ from typing import Any, NoReturn
 
 from .errors import KvpConnectionError, KvpError, KvpStalledError, KvpTimeoutError, ProtocolError
 from .link import LinkBase
-from .protocol import FIRST_EXTENDED, Reply
+from .protocol import FIRST_EXTENDED, Reply, encode_read
 from .session import Pending, new_reply
 
 __all__ = ["BlockingConnection"]
@@ -35,6 +38,11 @@ log = logging.getLogger(__name__)
 _Outcome = Reply | KvpError | None
 #: id, L, mode, value length: the head of a reply
 _HEAD = struct.Struct(">HHBH")
+#: a message id as the first two bytes of a frame
+_ID = struct.Struct(">H")
+#: read requests remembered by name (a control loop reads the same few names again and again)
+_READS_MAX = 256
+_clock = time.perf_counter
 
 
 def _timeval(seconds: float) -> bytes:
@@ -54,6 +62,10 @@ class BlockingConnection(LinkBase[_Outcome]):
         self._sock: socket.socket | None = None
         self._sock_timeout = -1.0
         self._stop = threading.Event()
+        #: the decoder holds part of a reply (kept by _dispatch: cheaper than asking it)
+        self._partial = False
+        #: read requests by name, without their id, and their values' prefix (see read_text)
+        self._reads: dict[str, tuple[bytes, bytes | None]] = {}
 
     @property
     def is_open(self) -> bool:
@@ -88,38 +100,37 @@ class BlockingConnection(LinkBase[_Outcome]):
 
     def request(self, name: str, frame0: bytes, timeout: float | None) -> Reply:
         """Send one request and wait for its reply (raises its error)."""
-        out = self._exchange(name, frame0, timeout, False)
-        assert isinstance(out, Reply)
-        return out
+        return self._exchange(name, frame0, timeout)
 
-    def _exchange(
-        self, name: str, frame0: bytes, timeout: float | None, value_only: bool
-    ) -> bytes | Reply:
-        """:meth:`request`; with ``value_only``, a successful read's non-empty value comes back
-        as its bytes (the serial fast path then builds no :class:`Reply`)."""
-        timeout = self.timeout if timeout is None else timeout
-        with self.lock:
-            session = self.session
-            if len(frame0) > session.pipeline_bytes:
-                session.check_size(name, frame0)
+    def read_text(self, name: str, timeout: float | None) -> str | Reply | None:
+        """The serial read of :meth:`pyopenshowvar.sync.Client.read`, for an idle connection.
+
+        None when it does not apply (closed, requests pending, bytes buffered, a request too
+        large): nothing was sent and the caller takes the general path. Otherwise the request
+        was sent and answered: the text of a successful read with a non-empty value, or the
+        :class:`Reply` of any other answer for the caller to interpret. Raises what
+        :meth:`request` raises.
+        """
+        entry = self._reads.get(name) or self._read_entry(name)
+        if entry is None:
+            return None
+        tail, prefix = entry
+        if timeout is None:
+            timeout = self.timeout
+        lock = self.lock
+        lock.acquire()  # not `with`: its __exit__ call costs twice an acquire and a release
+        try:
             sock = self._sock
-            if (
-                sock is None
-                or self._closed_reason is not None
-                or session.queue
-                or self._decoder.buffered
-            ):
-                self._check_open()
-                return self._request_queued(name, frame0, timeout)
-            # The serial case, on an idle connection: the reply normally comes whole in one
-            # recv, and then needs no queue, no index and no decoder buffer. This path is the
-            # control-loop hot path, hence written out rather than split into helpers.
-            if self._sock_timeout != timeout:
+            session = self.session
+            if sock is None or self._closed_reason is not None or session.queue or self._partial:
+                return None
+            # The control-loop hot path, written out: its cost is a serial read's round trip.
+            if timeout != self._sock_timeout:
                 self._fit_timeout(timeout)
             msg_id = session.next_id  # an idle connection: no id is pending
             session.next_id = (msg_id + 1) & 0xFFFF
-            frame = msg_id.to_bytes(2, "big") + frame0[2:]
-            self._last_activity = sent_at = time.perf_counter()
+            frame = _ID.pack(msg_id) + tail
+            self._last_activity = sent_at = _clock()
             try:
                 sock.sendall(frame)
             except OSError as exc:
@@ -129,30 +140,106 @@ class BlockingConnection(LinkBase[_Outcome]):
             except OSError:
                 data = b""  # timed out or lost: the general path meets it again and decides
             size = len(data)
-            if size >= 10 and data[:2] == frame[:2]:
-                msg_id, length, mode, n = _HEAD.unpack_from(data)
-                if length + 4 == size and n + 10 == size and mode < FIRST_EXTENDED:
-                    now = time.perf_counter()
-                    try:
-                        if value_only and n and mode == 0 == frame[4] and data[-1] == 1:
-                            value = data[7:-3]  # a successful read: the common case
-                            session.answered_read(name, msg_id, value)
-                            self.stats.record(now - sent_at)
-                            return value
-                        reply = new_reply(msg_id, mode, data[7:-3], data[-1], data[-3:-1])
-                        session.answered_idle(name, frame, reply)
-                    except ProtocolError as exc:
-                        self._protocol_error(exc)
-                        raise KvpConnectionError(self._closed_reason or "") from None
+            if size > 10:
+                rid, length, mode, n = _HEAD.unpack_from(data)
+                # one whole reply with our id, mode 0, success and a non-empty value
+                if (
+                    rid == msg_id
+                    and length == size - 4
+                    and n == size - 10
+                    and mode == 0
+                    and data[-1] == 1
+                ):
+                    now = _clock()
+                    value = data[7:-3]
+                    if prefix is not None and value.startswith(prefix):
+                        session.last_label = msg_id  # its shape holds (Session.text_prefix)
+                    else:
+                        self._check_value(name, msg_id, value, tail)
                     self.stats.record(now - sent_at)
-                    return reply
-            # anything else (a cut reply, several frames, another id, a timeout): queue the
-            # request after all and let the general path sort it out
-            pending = session.register_sent(name, frame, None, timeout)
-            pending.sent_at = sent_at
-            if data:
-                self._dispatch(data)
-            return self._wait(pending, sent_at + timeout, timeout)
+                    return value.decode("latin-1")
+            return self._finish_idle(name, frame, data, sent_at, timeout)
+        finally:
+            lock.release()
+
+    def _read_entry(self, name: str) -> tuple[bytes, bytes | None] | None:
+        """A read request for ``name`` without its id, and the prefix of its value once known;
+        None when the request is too large to send."""
+        frame0 = encode_read(0, name)
+        if len(frame0) > self.session.pipeline_bytes:
+            return None  # the general path refuses it with the reason
+        entry = (frame0[2:], self.session.text_prefix(name))
+        if len(self._reads) < _READS_MAX:
+            self._reads[name] = entry
+        return entry
+
+    def _check_value(self, name: str, msg_id: int, value: bytes, tail: bytes) -> None:
+        """The session's check of a successful read's value (it learns the variable's shape
+        on the first read); remembers the shape's prefix for the next reads of ``name``."""
+        session = self.session
+        try:
+            session.answered_read(name, msg_id, value)
+        except ProtocolError as exc:
+            self._protocol_error(exc)
+            raise KvpConnectionError(self._closed_reason or "") from None
+        prefix = session.text_prefix(name)
+        if prefix is not None and name in self._reads:
+            self._reads[name] = (tail, prefix)
+
+    def _exchange(self, name: str, frame0: bytes, timeout: float | None) -> Reply:
+        """:meth:`request`; on an idle connection, without queueing the request first."""
+        timeout = self.timeout if timeout is None else timeout
+        with self.lock:
+            session = self.session
+            if len(frame0) > session.pipeline_bytes:
+                session.check_size(name, frame0)
+            sock = self._sock
+            if sock is None or self._closed_reason is not None or session.queue or self._partial:
+                self._check_open()
+                return self._request_queued(name, frame0, timeout)
+            if self._sock_timeout != timeout:
+                self._fit_timeout(timeout)
+            msg_id = session.next_id  # an idle connection: no id is pending
+            session.next_id = (msg_id + 1) & 0xFFFF
+            frame = _ID.pack(msg_id) + frame0[2:]
+            self._last_activity = sent_at = _clock()
+            try:
+                sock.sendall(frame)
+            except OSError as exc:
+                self._send_failed(exc)
+            try:
+                data = sock.recv(65536)
+            except OSError:
+                data = b""  # timed out or lost: the general path meets it again and decides
+            return self._finish_idle(name, frame, data, sent_at, timeout)
+
+    def _finish_idle(
+        self, name: str, frame: bytes, data: bytes, sent_at: float, timeout: float
+    ) -> Reply:
+        """The reply to ``frame``, sent on an idle connection without being queued, given the
+        first bytes received. The serial case: the reply comes whole in one recv, alone, and
+        needs no queue, no index and no decoder buffer. Anything else (a cut reply, several
+        frames, another id, a timeout) queues the request after all, and the general path
+        sorts it out."""
+        session = self.session
+        size = len(data)
+        if size >= 10 and data[:2] == frame[:2]:
+            msg_id, length, mode, n = _HEAD.unpack_from(data)
+            if length + 4 == size and n + 10 == size and mode < FIRST_EXTENDED:
+                now = _clock()
+                reply = new_reply(msg_id, mode, data[7:-3], data[-1], data[-3:-1])
+                try:
+                    session.answered_idle(name, frame, reply)
+                except ProtocolError as exc:
+                    self._protocol_error(exc)
+                    raise KvpConnectionError(self._closed_reason or "") from None
+                self.stats.record(now - sent_at)
+                return reply
+        pending = session.register_sent(name, frame, None, timeout)
+        pending.sent_at = sent_at
+        if data:
+            self._dispatch(data)
+        return self._wait(pending, sent_at + timeout, timeout)
 
     def _request_queued(self, name: str, frame0: bytes, timeout: float) -> Reply:
         session = self.session
@@ -306,8 +393,7 @@ class BlockingConnection(LinkBase[_Outcome]):
         return True
 
     def _dispatch(self, data: bytes) -> None:
-        now = time.perf_counter()
-        self._last_activity = time.perf_counter()
+        self._last_activity = now = time.perf_counter()
         session = self.session
         try:
             for reply in self._decoder.feed_replies(data):
@@ -321,6 +407,8 @@ class BlockingConnection(LinkBase[_Outcome]):
                     pending.waiter = reply
         except ProtocolError as exc:
             self._protocol_error(exc)
+        finally:
+            self._partial = self._decoder.buffered > 0
 
     def _protocol_error(self, exc: ProtocolError) -> None:
         log.warning("protocol error from %s: %s; dropping the connection", self.endpoint, exc)

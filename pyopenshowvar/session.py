@@ -163,8 +163,9 @@ class Session(Generic[W]):
         self.bytes_in_flight = 0
         #: the next message id to try (ids still pending are skipped when allocating)
         self.next_id = 0
-        #: the wire id of the last reply matched (a legacy batch repeats it)
-        self._last_label: int | None = None
+        #: the wire id of the last reply matched (a legacy batch repeats it); a transport's
+        #: serial fast path sets it when it accepts a read through :meth:`text_prefix`
+        self.last_label: int | None = None
         self._probe: tuple[Pending[W], Pending[W]] | None = None
         self._shapes: dict[str, bytes] = {}
         #: replies matched in order because they repeated their batch's label (legacy proxies)
@@ -229,17 +230,28 @@ class Session(Generic[W]):
         """``reply`` (whose id is ``frame``'s) answers a request sent on an idle connection
         without being queued (the transports' serial fast path): check it."""
         self.check(name, frame, reply)
-        self._last_label = reply.msg_id
+        self.last_label = reply.msg_id
 
     def answered_read(self, name: str, msg_id: int, value: bytes) -> None:
         """The idle-path read ``msg_id`` succeeded with non-empty ``value``: check its shape."""
-        self._last_label = msg_id
+        self.last_label = msg_id
         known = self._shapes.get(name)
         if known is not None and known[0] in _PREFIX_SHAPES and value.startswith(known):
             return  # a struct, string or enum shape is a prefix of the text: no need to classify
         shape = value_shape(value)
         if known != shape:
             self._new_shape(name, shape, known, msg_id)
+
+    def text_prefix(self, name: str) -> bytes | None:
+        """What every successful read of ``name`` starts with, once its shape is known and is
+        literally a prefix (a struct's type, a string's quote, an enum's ``#``); else None.
+
+        A non-empty value that starts with it passes :meth:`answered_read`'s check, so a
+        transport may remember it and accept such a read by setting :attr:`last_label` alone
+        (a variable keeps its type for life; an entry evicted here stays just as true there).
+        """
+        known = self._shapes.get(name)
+        return known if known is not None and known[0] in _PREFIX_SHAPES else None
 
     def register_sent(self, name: str, frame: bytes, waiter: W, timeout: float) -> Pending[W]:
         """Queue a request sent on the serial fast path after all (its reply did not come
@@ -295,14 +307,14 @@ class Session(Generic[W]):
             if self.ids == "unknown":
                 self.ids = "echoed"
                 log.debug("%s echoes message ids: matching by id", self.endpoint)
-        self._last_label = reply.msg_id
+        self.last_label = reply.msg_id
         self._finish(pending)
         return (None if pending.abandoned else pending), dropped
 
     def _continuation(self, reply: Reply) -> Pending[W]:
         """A reply whose id is not pending: the legacy batch label, or a protocol error."""
         head = self.queue[0] if self.queue else None
-        repeats = head is not None and reply.msg_id == self._last_label
+        repeats = head is not None and reply.msg_id == self.last_label
         if repeats and self.ids == "unknown" and self._probe is not None and head is self._probe[1]:
             self.ids = "legacy"
             log.warning(

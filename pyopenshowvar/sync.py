@@ -128,17 +128,14 @@ class Client(SyncC3Methods, SyncRobotHelpers, ClientCore):
     def read(self, name: str, *, timeout: float | None = None) -> str:
         """Read ``name`` and return the proxy's text (raises ``UnknownVariableError`` for
         KVP's empty-value-with-success answer, ``ReadFailedError`` for a failure status)."""
-        frame0 = self._read_frames.get(name) or self._read_frame(name)
         conn = self._conn
-        if conn is not None and conn.is_open:  # the hot path, without the retry wrapper
-            try:
-                out = conn._exchange(name, frame0, timeout, True)
-            except KvpStalledError as exc:
-                self._may_retry(exc)
-            else:
-                if isinstance(out, bytes):
-                    return out.decode("latin-1")  # checked: success status, non-empty value
+        if conn is not None:  # the serial fast path first, without the retry wrapper
+            out = conn.read_text(name, timeout)
+            if isinstance(out, str):
+                return out  # checked: success status, non-empty value
+            if out is not None:
                 return self._check_read(name, out)
+        frame0 = self._read_frames.get(name) or self._read_frame(name)
         return self._check_read(name, self._request(name, frame0, timeout))
 
     def read_value(

@@ -1,0 +1,262 @@
+"""Where a serial read's time goes: the synchronous client against py-openshowvar (issue 14).
+
+``bench/client_roundtrip.py`` measures the whole round trip, which the emulator and the
+scheduler dominate; this script takes the client's two own costs apart:
+
+1. **without the network**: ``read("$AXIS_ACT")`` on a connected client whose socket is
+   replaced by an in-process fake that answers at once with the right id (the same fake for
+   both clients): the time on the round trip's critical path (from the reply's delivery to
+   the next request's send, median) and the CPU per read (best of ``--repeat`` runs of
+   ``process_time``);
+2. **system calls per read** against the emulator (``bench/_emu_server.py``, latency ``none``):
+   each client runs in a child process under ``strace -c``, once with no reads and once with
+   ``N`` reads, and the difference is divided by ``N`` (start-up cancels out). Skipped when
+   ``strace`` is not installed or not permitted.
+
+Run::
+
+    .venv/bin/python bench/sync_read_cost.py [--quick] [--repeat 5] [--json out.json]
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from _common import EmuProcess, Row, base_parser, median, print_rows, write_json
+
+from pyopenshowvar import sync
+from pyopenshowvar.blocking import BlockingConnection
+from pyopenshowvar.protocol import Mode, Reply, encode_reply
+
+try:
+    import py_openshowvar
+except ImportError:  # optional peer (the `test` and `bench` extras install it)
+    py_openshowvar = None
+
+NAME = "$AXIS_ACT"
+VALUE = (
+    b"{E6AXIS: A1 0.0, A2 -90.0000, A3 90.0000, A4 0.0, A5 0.0, A6 0.0,"
+    b" E1 0.0, E2 0.0, E3 0.0, E4 0.0, E5 0.0, E6 0.0}"
+)
+
+
+class _FakeSocket:
+    """Answers every request at once with ``VALUE`` under the request's own id, and times the
+    client's critical path: from a reply's delivery to the next request's send (what the
+    client adds to a serial round trip; work between a send and its recv overlaps the server's)."""
+
+    def __init__(self) -> None:
+        self._tail = encode_reply(Reply(0, Mode.READ, VALUE))[2:]
+        self._id = b"\0\0"
+        self._delivered = 0.0
+        self.critical: list[float] = []
+
+    def sendall(self, data: bytes) -> None:
+        now = time.perf_counter()
+        if self._delivered:
+            self.critical.append(now - self._delivered)
+        self._id = data[:2]
+
+    def recv(self, size: int) -> bytes:
+        data = self._id + self._tail
+        self._delivered = time.perf_counter()
+        return data
+
+    def setsockopt(self, *args: Any) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+class _Fake:
+    """A client connected to a :class:`_FakeSocket`: ``read()`` and its socket."""
+
+    def __init__(self, read: Callable[[], object], sock: _FakeSocket) -> None:
+        self.read = read
+        self.sock = sock
+
+    def cpu(self, n: int) -> float:
+        """CPU seconds per read (everything the client does, hidden or not)."""
+        for _ in range(1000):
+            self.read()
+        read = self.read
+        t0 = time.process_time()
+        for _ in range(n):
+            read()
+        return (time.process_time() - t0) / n
+
+    def critical(self, n: int) -> float:
+        """Median seconds from a reply's delivery to the next request's send."""
+        self.sock.critical.clear()
+        read = self.read
+        for _ in range(n):
+            read()
+        return median(self.sock.critical)
+
+
+def _ours_fake() -> _Fake:
+    client = sync.Client("127.0.0.1", 1, keepalive=None, id_policy="strict")
+    conn = BlockingConnection("127.0.0.1", 1, keepalive=None, id_policy="strict")
+    sock = _FakeSocket()
+    conn._sock = sock  # type: ignore[assignment]
+    conn.use_stats(client.stats)
+    client._conn = conn
+    assert client.read(NAME) == VALUE.decode()
+    return _Fake(lambda: client.read(NAME), sock)
+
+
+def _peer_fake() -> _Fake:
+    assert py_openshowvar is not None
+    client = py_openshowvar.openshowvar.__new__(py_openshowvar.openshowvar)
+    client.msg_id = 1
+    client.sock = sock = _FakeSocket()
+    assert client.read(NAME, debug=False) == VALUE
+    return _Fake(lambda: client.read(NAME, debug=False), sock)
+
+
+# --------------------------------------------------------------------------- system calls
+
+_CHILD = """
+import sys
+from pyopenshowvar import sync
+which, port, n = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+if which == "ours":
+    c = sync.Client("127.0.0.1", port, keepalive=None)
+    c.connect()
+    read = lambda: c.read("$AXIS_ACT")
+else:
+    import py_openshowvar
+    c = py_openshowvar.openshowvar("127.0.0.1", port)
+    read = lambda: c.read("$AXIS_ACT", debug=False)
+read()
+for _ in range(n):
+    read()
+c.close()
+"""
+
+
+def _strace_calls(which: str, port: int, n: int) -> dict[str, int]:
+    """System calls of the child process by name (strace -c summary)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "calls.txt"
+        subprocess.run(
+            [
+                "strace",
+                "-c",
+                "-o",
+                str(out),
+                sys.executable,
+                "-c",
+                _CHILD,
+                which,
+                str(port),
+                str(n),
+            ],
+            check=True,
+            capture_output=True,
+        )
+        calls: dict[str, int] = {}
+        for line in out.read_text().splitlines():
+            parts = line.split()
+            # "% time  seconds  usecs/call  calls  [errors]  syscall"
+            if len(parts) >= 5 and parts[0][0].isdigit() and parts[-1] != "total":
+                calls[parts[-1]] = int(parts[3])
+        return calls
+
+
+def _calls_per_read(which: str, port: int, n: int) -> dict[str, float]:
+    base, loaded = _strace_calls(which, port, 0), _strace_calls(which, port, n)
+    per = {k: (loaded.get(k, 0) - base.get(k, 0)) / n for k in loaded.keys() | base.keys()}
+    return {k: v for k, v in sorted(per.items()) if abs(v) >= 0.01}
+
+
+def _strace_works() -> bool:
+    if shutil.which("strace") is None:
+        return False
+    probe = subprocess.run(["strace", "-c", "-o", "/dev/null", "true"], capture_output=True)
+    return probe.returncode == 0
+
+
+def run(quick: bool, repeat: int) -> tuple[list[Row], dict[str, Any]]:
+    rows: list[Row] = []
+    extra: dict[str, Any] = {}
+    n = 20_000 if quick else 200_000
+    fakes = {"ours": _ours_fake()}
+    if py_openshowvar is not None:
+        fakes["peer"] = _peer_fake()
+    cpu: dict[str, list[float]] = {k: [] for k in fakes}
+    crit: dict[str, list[float]] = {k: [] for k in fakes}
+    for _ in range(repeat):  # alternate, so load drifts hit both alike
+        for key, fake in fakes.items():
+            cpu[key].append(fake.cpu(n) * 1e6)
+            crit[key].append(fake.critical(n) * 1e6)
+    peer_cpu, peer_crit = cpu.get("peer"), crit.get("peer")
+    rows.append(
+        Row(
+            "client time on a serial read's critical path, no network (reply to next send, median)",
+            median(crit["ours"]),
+            "µs",
+            peer=median(peer_crit) if peer_crit else None,
+            peer_name="py-openshowvar",
+            target=("ratio", "<=", 1.0),
+            runs=crit["ours"],
+            note="the client's share of a serial round trip: what it does between a send and"
+            " its recv overlaps the server's work",
+        )
+    )
+    rows.append(
+        Row(
+            "client CPU per serial read, no network (best run)",
+            min(cpu["ours"]),
+            "µs",
+            peer=min(peer_cpu) if peer_cpu else None,
+            peer_name="py-openshowvar",
+            runs=cpu["ours"],
+            note=f"median of the runs: ours {median(cpu['ours']):.2f} µs"
+            + (f", py-openshowvar {median(peer_cpu):.2f} µs" if peer_cpu else ""),
+        )
+    )
+    if _strace_works() and py_openshowvar is not None:
+        reads = 200 if quick else 2000
+        with EmuProcess("--latency", "none") as emu:
+            ours = _calls_per_read("ours", emu.port, reads)
+            theirs = _calls_per_read("peer", emu.port, reads)
+        extra["syscalls_per_read"] = {"ours": ours, "py-openshowvar": theirs}
+        rows.append(
+            Row(
+                "system calls per serial read (strace -c)",
+                sum(ours.values()),
+                "calls",
+                peer=sum(theirs.values()),
+                peer_name="py-openshowvar",
+                target=("ratio", "<=", 1.0),
+                note="ours "
+                + ", ".join(f"{k} {v:.2f}" for k, v in ours.items())
+                + "; py-openshowvar "
+                + ", ".join(f"{k} {v:.2f}" for k, v in theirs.items()),
+            )
+        )
+    return rows, extra
+
+
+def main() -> None:
+    ap = base_parser(__doc__)
+    args = ap.parse_args()
+    repeat = args.repeat or (1 if args.quick else 5)
+    rows, extra = run(args.quick, repeat)
+    print_rows(f"Serial read cost (CPU: best of {repeat} runs)", rows)
+    write_json(args.json, "sync_read_cost", rows, extra)
+
+
+if __name__ == "__main__":
+    main()
