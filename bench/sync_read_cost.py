@@ -11,7 +11,10 @@ scheduler dominate; this script takes the client's two own costs apart:
 2. **system calls per read** against the emulator (``bench/_emu_server.py``, latency ``none``):
    each client runs in a child process under ``strace -c``, once with no reads and once with
    ``N`` reads, and the difference is divided by ``N`` (start-up cancels out). Skipped when
-   ``strace`` is not installed or not permitted.
+   ``strace`` is not installed or not permitted;
+3. **the serial round trip, interleaved**: every round reads once with each client on the same
+   emulator (order alternating), so drifts of the machine's load hit both alike; blocks of
+   reads per client (``client_roundtrip.py``) spread by several µs between runs.
 
 Run::
 
@@ -124,6 +127,35 @@ def _peer_fake() -> _Fake:
     return _Fake(lambda: client.read(NAME, debug=False), sock)
 
 
+# --------------------------------------------------------------------------- interleaved
+
+
+def _interleaved(port: int, rounds: int) -> dict[str, float]:
+    """Median round trip of each client when every round reads once with each (same drift)."""
+    assert py_openshowvar is not None
+    peer = py_openshowvar.openshowvar("127.0.0.1", port)
+    ours = sync.Client("127.0.0.1", port, keepalive=None)
+    ours.connect()
+    clients: list[tuple[str, Callable[[], object]]] = [
+        ("ours", lambda: ours.read(NAME)),
+        ("peer", lambda: peer.read(NAME, debug=False)),
+    ]
+    times: dict[str, list[float]] = {"ours": [], "peer": []}
+    clock = time.perf_counter
+    try:
+        for i in range(rounds + 200):
+            clients.reverse()  # neither always goes first
+            for key, read in clients:
+                t0 = clock()
+                read()
+                if i >= 200:
+                    times[key].append(clock() - t0)
+    finally:
+        ours.close()
+        peer.close()
+    return {k: median(v) for k, v in times.items()}
+
+
 # --------------------------------------------------------------------------- system calls
 
 _CHILD = """
@@ -226,6 +258,20 @@ def run(quick: bool, repeat: int) -> tuple[list[Row], dict[str, Any]]:
             + (f", py-openshowvar {median(peer_cpu):.2f} µs" if peer_cpu else ""),
         )
     )
+    if py_openshowvar is not None:
+        with EmuProcess("--latency", "none") as emu:
+            inter = _interleaved(emu.port, 2000 if quick else 20_000)
+        rows.append(
+            Row(
+                "serial read round trip `$AXIS_ACT`, interleaved (one read each per round, median)",
+                inter["ours"] * 1e6,
+                "µs",
+                peer=inter["peer"] * 1e6,
+                peer_name="py-openshowvar",
+                target=("ratio", "<=", 1.0),
+                note="same emulator, same rounds: load drifts hit both clients alike",
+            )
+        )
     if _strace_works() and py_openshowvar is not None:
         reads = 200 if quick else 2000
         with EmuProcess("--latency", "none") as emu:

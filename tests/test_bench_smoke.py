@@ -32,6 +32,7 @@ BENCH = Path(__file__).resolve().parents[1] / "bench"
         ("c3.py", "upload-to-motion"),
         ("snapshot.py", "20 variables: `read_snapshot`"),
         ("cell_cpu.py", "CPU per robot, 2 robots, moving"),
+        ("sync_read_cost.py", "critical path"),
     ],
 )
 def test_benchmark_runs_quick(script: str, expect: str) -> None:
