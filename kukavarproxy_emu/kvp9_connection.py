@@ -125,8 +125,15 @@ class _SlowWire:
 
     async def show_var(self, name: bytes) -> bytes:
         emu = self.conn.emu
-        call = partial(_show, emu.responder, name)
+        call = partial(self._show_now, name)
         return await emu.service.run("read", call) if emu.service else call()
+
+    def _show_now(self, name: bytes) -> bytes:
+        # a robot coasting since the read arrived (see motion.clock) first runs its due ticks
+        emu = self.conn.emu
+        if emu.robot is not None:
+            emu.robot.clock.settle()
+        return _show(emu.responder, name)
 
     async def set_var(self, name: bytes, value: bytes) -> bool:
         emu = self.conn.emu

@@ -43,6 +43,7 @@ from typing import TYPE_CHECKING, Self
 from pyopenshowvar.errors import ProtocolError
 from pyopenshowvar.protocol import (
     FramingError,
+    Reply,
     Request,
     RequestDecoder,
     decode_request,
@@ -335,6 +336,14 @@ class _Connection(asyncio.BufferedProtocol):
             emu._enqueue(self)
         self._update_reading()
 
+    def _answer(self, request: Request, msg_id: int) -> Reply:
+        """The reply, computed now: a robot coasting since the request arrived (see
+        :mod:`.motion.clock`) first runs its due ticks, so the reply shows this moment."""
+        robot = self.emu.robot
+        if robot is not None:
+            robot.clock.settle()
+        return self.responder.answer(request, msg_id)
+
     async def _work(self) -> None:
         emu = self.emu
         transport = self.transport
@@ -351,12 +360,12 @@ class _Connection(asyncio.BufferedProtocol):
                 responder = self.responder
                 kind = responder.kind(request)
                 if emu.service is not None and kind is not None:
-                    compute = partial(responder.answer, request, msg_id)
+                    compute = partial(self._answer, request, msg_id)
                     reply = await emu.service.run(
                         kind, compute, responder.weight(request), arrival=arrival
                     )
                 else:
-                    reply = responder.answer(request, msg_id)
+                    reply = self._answer(request, msg_id)
                 frame = encode_reply(reply)
                 emu.stats.requests += 1
                 faults = emu.faults.match(self.index, nth) if emu.faults else []

@@ -131,6 +131,12 @@ class VariableStore:
         #: Changes of any variable so far, and per variable (base name): a KRL pass that read
         #: only unchanged variables and wrote nothing would do exactly the same again.
         self.mutations = 0
+        #: Of those, the marks of lazy values as stale (:meth:`defer`), not changes as such.
+        self.stale_marks = 0
+        #: Called before every write from :meth:`write`, :meth:`write_words` and untrusted
+        #: :meth:`set_system`: the simulated robot brings a coasting clock up to date first,
+        #: so a change from outside its tick is acted on by the next regular tick.
+        self.on_write: Callable[[], None] | None = None
         self._versions: dict[str, int] = {}
         # names read since the last warm() and in the cycle before it (see warm)
         self._hot: dict[str, None] = {}
@@ -353,6 +359,8 @@ class VariableStore:
         REAL elements accept digits, elements beyond the array fail, out-of-range values fail
         one by one.
         """
+        if self.on_write is not None:
+            self.on_write()
         path = parse_name(f"{name}[1]")
         var = self._vars.get(path.base) if path is not None else None
         if var is None or not words or var.read_only or var.text_len or len(var.dims) != 1:
@@ -391,6 +399,8 @@ class VariableStore:
         Raises :class:`WriteRefused` (store unchanged) for unknown or read-only targets, bad
         indices, type mismatches, unknown members and values out of range.
         """
+        if self.on_write is not None:
+            self.on_write()
         self._assign(name, partial(self._parse, text=text), bypass_read_only=False)
         return text
 
@@ -418,6 +428,8 @@ class VariableStore:
         ``trusted``: the caller built a complete value of the declared type itself (the
         simulated robot's readings, every cycle): a whole variable is swapped in unchecked.
         """
+        if not trusted and self.on_write is not None:
+            self.on_write()
         path = parse_name(name)
         var = self._vars.get(path.base) if path is not None else None
         if path is None or var is None:
@@ -470,6 +482,7 @@ class VariableStore:
         )
         entry = (group, fill)
         stale = self._stale
+        self.stale_marks += len(group)
         for name in group:
             stale[name] = entry
             self._bump(name)  # its value changes when it is filled

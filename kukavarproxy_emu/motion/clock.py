@@ -26,6 +26,18 @@ When the loop falls behind (a long callback, a busy machine), late ticks run bac
 the clock has caught up (each in its own loop iteration, so requests are still answered in
 between); after more than ``MAX_BEHIND`` seconds behind it gives up and re-bases the deadlines
 (``overruns`` counts that), so a suspended process does not replay minutes.
+
+**Coasting.** Waking the process costs more than a tick of a robot at rest, and a process
+woken every 12 ms already costs about 1 % of a core. A clock with ``coast = K > 1`` and a
+``quiet()`` predicate (the robot: "this tick changed nothing that wall time could show":
+kernel standing still, both KRL passes skipped as exact repeats, the plant resting, no store
+write) may therefore sleep through up to ``K - 1`` ticks and run them back to back at its next
+wake-up, just before the tick that is due then. No tick is skipped and each still advances
+simulated time by exactly one ``ipo``; only their wall time moves. Whoever looks at the robot
+calls :meth:`IpoClock.poll` first (the servers before each batch, the robot's in-process API,
+any write into the store from outside a tick): it runs every coasted tick that is due and ends
+the coast, so the reader sees the state of the last due tick and a write is acted on by the
+next regular tick. Coasted ticks are deliberate, so they are not counted as lateness.
 """
 
 from __future__ import annotations
@@ -53,6 +65,9 @@ EARLY = 0.004
 BURST = 0.0005
 #: Seconds between two "clock behind" warnings of one process.
 WARN_EVERY = 10.0
+#: Longest wall time a clock may coast (s), whatever its ``coast`` and period: well below
+#: ``MAX_BEHIND``, so a coast is never mistaken for a stall.
+COAST_MAX = 0.1
 
 
 @dataclass(frozen=True, slots=True)
@@ -88,9 +103,11 @@ class _Wheel:
         self._when = float("inf")
         #: Clocks whose due tick waits for :meth:`release` (or for their hold to run out).
         self.held: set[IpoClock] = set()
+        #: Timer callbacks run so far (wake-ups of the process for its clocks).
+        self.fires = 0
 
     def push(self, clock: IpoClock) -> None:
-        clock._wake = clock._deadline
+        clock._wake = clock._deadline + clock._coasting * clock.period
         heapq.heappush(self._heap, (clock._wake, next(self._seq), clock))
         self._arm()
 
@@ -110,6 +127,7 @@ class _Wheel:
 
     def _fire(self) -> None:
         self._handle, self._when = None, float("inf")
+        self.fires += 1
         loop, heap = self.loop, self._heap
         now = loop.time()
         due: list[IpoClock] = []
@@ -121,11 +139,13 @@ class _Wheel:
             if not clock._running:
                 continue
             if clock._may_tick(now):
-                clock._tick(loop.time())
-                clock._wake = clock._deadline
+                clock._catch_up(now)
+                if clock._deadline <= now:  # not after a re-base in the catch-up
+                    clock._tick(loop.time())
+                clock._plan()
             else:  # held: until release() or the hold runs out
                 clock._holding = True
-                clock._wake = clock._deadline + clock.max_hold
+                clock._wake = clock._due() + clock.max_hold
                 self.held.add(clock)
             heapq.heappush(heap, (clock._wake, next(self._seq), clock))
         self._early(now)
@@ -144,11 +164,12 @@ class _Wheel:
             if not clock._running or wake != clock._wake:
                 heapq.heappop(heap)
                 continue
-            if clock.gate is not None or wake != clock._deadline:
+            if clock.gate is not None or clock._holding:
                 return  # a gated (or held) clock ticks at its deadline, not before
             heapq.heappop(heap)
+            clock._catch_up(now + EARLY)
             clock._tick(max(loop.time(), clock._deadline))
-            clock._wake = clock._deadline
+            clock._plan()
             heapq.heappush(heap, (clock._wake, next(self._seq), clock))
 
     def release(self) -> None:
@@ -156,8 +177,12 @@ class _Wheel:
         away, the best moment the tick will get (even if it is longer than that)."""
         held, self.held = self.held, set()
         for clock in held:
-            if clock._running and clock._deadline <= self.loop.time():
-                clock._tick(self.loop.time())
+            now = self.loop.time()
+            if clock._running and clock._due() <= now:
+                clock._catch_up(now)
+                if clock._deadline <= now:
+                    clock._tick(self.loop.time())
+                clock._coasting = 0
                 self.push(clock)
 
 
@@ -205,11 +230,15 @@ class IpoClock:
         gate: Callable[[float], bool] | None = None,
         max_hold: float = 0.003,
         keep: int = 100_000,
+        coast: int = 1,
+        quiet: Callable[[], bool] | None = None,
     ) -> None:
         if ipo <= 0 or speed <= 0:
             raise ValueError("ipo and speed must be positive")
         if not phase >= 0:
             raise ValueError("phase must be >= 0")
+        if coast < 1:
+            raise ValueError("coast must be >= 1")
         self.callback = callback
         self.ipo = ipo
         self.speed = speed
@@ -225,8 +254,15 @@ class IpoClock:
         self.held = 0
         self.ticks = 0
         self.overruns = 0
-        #: Lateness of the most recent ticks (s), for the jitter benchmark.
+        #: Lateness of the most recent ticks (s), for the jitter benchmark; coasted ticks are
+        #: deliberately late and not recorded.
         self.jitter: deque[float] = deque(maxlen=keep)
+        #: At most this many ticks per wake-up while ``quiet()`` (1: never coast).
+        self.coast = coast
+        #: Did the tick that just ran change nothing wall time could show? (see the module)
+        self.quiet = quiet
+        #: Ticks run late on purpose, in a coast's catch-up.
+        self.coasted = 0
         self._wheel: _Wheel | None = None
         self._running = False
         self._start = 0.0
@@ -234,6 +270,8 @@ class IpoClock:
         self._deadline = float("inf")
         self._wake = float("inf")
         self._holding = False
+        #: Ticks slept through: due from ``_deadline`` on, run before the tick due at the wake.
+        self._coasting = 0
 
     @property
     def period(self) -> float:
@@ -252,6 +290,7 @@ class IpoClock:
         self._wheel = _wheel(loop)
         self._start = loop.time() + self.phase
         self._n = 1
+        self._coasting = 0
         self._deadline = self._start + self.period
         self._running = True
         self._wheel.push(self)
@@ -262,35 +301,75 @@ class IpoClock:
             self._wheel._arm()  # drops this clock's entry; no timer is left for an empty wheel
 
     def poll(self) -> None:
-        """Run the tick now if it is due.
+        """Bring the robot up to date: run the coasted ticks that are due, then the tick due
+        now (if any), and end a coast (back to one wake-up per tick).
 
         The server calls this before answering each batch of requests: under load from many
         clients one event-loop pass answers every client before the timer callback gets its
         turn, so the tick would wait behind all of them. Polling here bounds the lateness by one
-        client's batch instead.
+        client's batch instead. A coasting robot must poll before it is looked at or changed
+        from outside its tick (see the module).
         """
         wheel = self._wheel
         if wheel is None or not self._running:
             return
+        coasting = self._coasting
         now = wheel.loop.time()
+        if now < self._deadline and not coasting:
+            return
+        if coasting:
+            self._catch_up(now)  # coasted ticks ran late on purpose: no gate for them
+            self._coasting = 0
         if now >= self._deadline and self._may_tick(now):
             self._tick(now)
             wheel.held.discard(self)
-            wheel.push(self)  # the entry of the old deadline is stale now
+        elif not coasting:
+            return
+        wheel.push(self)  # the entry of the old deadline (or wake) is stale now
+
+    def settle(self) -> None:
+        """Run the coasted ticks that are due and end the coast, but not a regular tick: for a
+        reply computed at its latency deadline, which a regular tick must not delay (the
+        coasted ticks of a robot at rest cost microseconds)."""
+        if self._coasting and self._wheel is not None and self._running:
+            self._catch_up(self._wheel.loop.time())
+            self._wheel.push(self)
+
+    def _due(self) -> float:
+        """The deadline of the tick the clock wakes for (after the coasted ones)."""
+        return self._deadline + self._coasting * self.period
+
+    def _catch_up(self, limit: float) -> None:
+        """Run the coasted ticks due by ``limit``, back to back; the coast ends."""
+        while self._coasting and self._deadline <= limit and self._running:
+            self._coasting -= 1
+            self.coasted += 1
+            self._tick(limit, coasted=True)
+        self._coasting = 0
+
+    def _plan(self) -> None:
+        """After a regular tick: coast through the next ticks if it was quiet, else wake for
+        the next one."""
+        k = 0
+        if self.coast > 1 and self.quiet is not None and self.quiet():
+            k = min(self.coast - 1, int(COAST_MAX / self.period))
+        self._coasting = k
+        self._wake = self._deadline + k * self.period
 
     def _may_tick(self, now: float) -> bool:
         gate = self.gate
-        if gate is None or now - self._deadline >= self.max_hold:
+        if gate is None or now - self._due() >= self.max_hold:
             return True
         return gate(self.cost)
 
-    def _tick(self, now: float) -> None:
+    def _tick(self, now: float, *, coasted: bool = False) -> None:
         late = now - self._deadline
         if late > MAX_BEHIND:
             self.overruns += 1
             _warn_behind(late)
             self._start, self._n = now, 0
-        self.jitter.append(max(late, 0.0))
+        if not coasted:
+            self.jitter.append(max(late, 0.0))
         if self._holding:
             self.held += 1
             self._holding = False

@@ -450,6 +450,16 @@ class MotionKernel(Publisher):
             self._q_base = self.q.copy()
         self.planned_q = self.active[-1].end_q.copy() if self.active else self.q.copy()
 
+    @property
+    def at_rest(self) -> bool:
+        """Standing on the planned point with nothing to run: a tick changes only the time."""
+        return (
+            not self.active
+            and not self.pending
+            and self.q is self._still_q
+            and self.planned_q is self._still_planned
+        )
+
     # --- the interpolation cycle -----------------------------------------------------------
     def tick(self) -> None:
         """Advance one IPO cycle and publish the new state to the store."""

@@ -15,6 +15,7 @@ message text is in the read-only ``$EMU_MESSAGE[]``. Writing ``EMU_RESTART = TRU
 
 from __future__ import annotations
 
+import asyncio
 import logging
 from collections.abc import Sequence
 from pathlib import Path
@@ -42,6 +43,8 @@ log = logging.getLogger(__name__)
 #: Characters of ``$EMU_MESSAGE[]`` (longer messages are cut).
 MESSAGE_LENGTH = 128
 _WRENCH = ("FX", "FY", "FZ", "MX", "MY", "MZ")
+#: Ticks per wake-up of a robot at rest (see "Coasting" in :mod:`.clock`): 8 × 12 ms.
+COAST = 8
 
 
 class Robot:
@@ -63,6 +66,7 @@ class Robot:
         calibration_error: int | None = None,
         torque_noise: float | None = None,
         obstacles: Sequence[Obstacle] = (),
+        coast: int = COAST,
     ) -> None:
         self.store = store
         ideal_noise = (noise or 0.0) if plant == "ideal" else 0.0
@@ -93,7 +97,12 @@ class Robot:
 
             self.sps = KrlSubmit(load_module(sps), store, ipo=ipo)
             self.sps.start()
-        self.clock = IpoClock(self.tick, ipo=ipo, speed=speed, phase=phase)
+        self.clock = IpoClock(
+            self.tick, ipo=ipo, speed=speed, phase=phase, coast=coast, quiet=self._is_quiet
+        )
+        self._ticking = False
+        self._quiet = False
+        store.on_write = self._outside_write
         #: True while the robot program runs (False after a stop or with no program).
         self.running = False
         #: The last error message ("" when none).
@@ -123,17 +132,76 @@ class Robot:
 
     def tick(self) -> None:
         """One interpolation cycle (the clock calls it; tests may call it directly)."""
-        self._check_restart()
-        if self.running:
-            try:
-                self.program.step(self.kernel)
-            except MotionRefused as exc:
-                self.fault(str(exc))
-        if self.sps is not None:
-            self.sps.step()
-        self.kernel.tick()
-        # the texts clients poll every cycle, formatted here rather than in their replies
-        self.store.warm()
+        store = self.store
+        changes = store.mutations - store.stale_marks
+        skips = self._skips()
+        self._ticking = True
+        try:
+            self._check_restart()
+            if self.running:
+                try:
+                    self.program.step(self.kernel)
+                except MotionRefused as exc:
+                    self.fault(str(exc))
+            if self.sps is not None:
+                self.sps.step()
+            self.kernel.tick()
+            # the texts clients poll every cycle, formatted here rather than in their replies
+            store.warm()
+        finally:
+            self._ticking = False
+        plant = self.plant
+        self._quiet = (
+            store.mutations - store.stale_marks == changes
+            and self.kernel.at_rest
+            and (plant is None or plant.resting)
+            and skips is not None
+            and self._skips() == (skips[0] + skips[2], skips[1] + skips[3], skips[2], skips[3])
+        )
+
+    def _skips(self) -> tuple[int, int, int, int] | None:
+        """The KRL passes skipped as exact repeats so far (program, SPS) and how many a quiet
+        tick adds to each (0 for an interpreter that does not run); None: a program whose
+        passes cannot be told apart (a Python program other than Idle)."""
+        from ..krl.executor import KrlProgram  # the interpreter imports motion
+
+        program = self.program
+        if not self.running or isinstance(program, Idle):
+            p, dp = 0, 0
+        elif isinstance(program, KrlProgram):
+            interp = program.interp
+            if interp is None or interp.finished or interp.halted:
+                p, dp = 0, 0
+            else:
+                p, dp = interp.skipped, 1
+        else:
+            return None
+        sps = self.sps
+        if sps is None or not sps.running:
+            return p, 0, dp, 0
+        return p, sps.interp.skipped, dp, 1
+
+    def _is_quiet(self) -> bool:
+        return self._quiet
+
+    def _outside_write(self) -> None:
+        """A store write from outside the tick (a request, an app, a test): a coasting clock
+        runs its due ticks first and ends the coast."""
+        if not self._ticking and self.clock._coasting:
+            self.sync()
+
+    def sync(self) -> None:
+        """Bring a coasting clock up to date (see :meth:`.clock.IpoClock.poll`) when called on
+        the robot's event loop; from another thread it does nothing (ticks never run there)."""
+        wheel = self.clock._wheel
+        if wheel is None:
+            return
+        try:
+            running = asyncio.get_running_loop()
+        except RuntimeError:
+            return
+        if running is wheel.loop:
+            self.clock.poll()
 
     # --- errors ------------------------------------------------------------------------------
     def fault(self, message: str) -> None:
@@ -172,16 +240,19 @@ class Robot:
         values = [float(v) for v in wrench]
         if len(values) != 6 or not all(np.isfinite(values)):
             raise ValueError("a wrench is 6 finite numbers: FX FY FZ MX MY MZ")
+        # set_system brings a coasting clock up to date (store.on_write) before the change
         self.store.set_system("EMU_WRENCH", Struct(None, dict(zip(_WRENCH, values, strict=True))))
 
     @property
     def time(self) -> float:
-        """Simulated seconds since the robot started."""
+        """Simulated seconds since the robot started (up to date: a coasting clock catches up)."""
+        self.sync()
         return self.kernel.time
 
     @property
     def q(self) -> npt.NDArray[np.float64]:
-        """Current set-point axes A1..A6 (deg)."""
+        """Current set-point axes A1..A6 (deg) (up to date: a coasting clock catches up)."""
+        self.sync()
         return self.kernel.q.copy()
 
     def jitter(self) -> JitterStats:

@@ -43,6 +43,9 @@ def robot_state_of(robot: Any, model: Any) -> tuple[FloatArray, FloatArray, floa
     where it is commanded)."""
     from pyopenshowvar.kinematics import fk_matrix
 
+    sync = getattr(robot, "sync", None)
+    if sync is not None:
+        sync()  # a robot coasting at rest runs its due ticks first (kukavarproxy_emu.motion.clock)
     truth = getattr(getattr(robot, "plant", None), "truth", None)
     if truth is not None:
         return np.asarray(truth.q, float), np.asarray(truth.flange, float), float(truth.time)
