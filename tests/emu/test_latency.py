@@ -10,6 +10,7 @@ import time
 import pytest
 
 from kukavarproxy_emu.latency import (
+    MAX_COMPUTE_LEAD,
     PROFILES,
     DeadlineTimer,
     LatencyProfile,
@@ -190,7 +191,9 @@ async def test_reply_times_do_not_depend_on_the_clients_pacing(
         # never answered before the service time (main: back to back got 0.2 ms); the median's
         # accuracy is the scheduler's and the timer's (tested above): here only "not stalled",
         # since a loaded CI machine adds milliseconds of its own
-        assert min(rtt) >= 0.0025 - DeadlineTimer.MAX_LEAD - 1e-4, (gap, min(rtt))
+        # (less the leads the emulator takes out: timer overshoot and its own computing time)
+        early = DeadlineTimer.MAX_LEAD + MAX_COMPUTE_LEAD + 1e-4
+        assert min(rtt) >= 0.0025 - early, (gap, min(rtt))
         assert statistics.median(rtt) < 0.0025 + 0.005, (gap, statistics.median(rtt))
 
 
