@@ -70,7 +70,10 @@ async def main_async(seconds: float) -> list[Row]:
             "asyncio loop + 12 ms IPO clock alone (empty cycle)",
             base,
             "%",
-            note="included in every figure below",
+            note=(
+                "included in every figure below but the robots at rest that coast"
+                " (woken once per 8 cycles; docs/emulator-robot.md)"
+            ),
         )
     ]
     for state in ("rest", "moving"):
