@@ -17,11 +17,12 @@ import asyncio
 import contextlib
 import logging
 import os
-import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Self
+from typing import Any, Self, TypeVar
+
+from kukavarproxy_emu.loopthread import LoopThread
 
 from . import registers as reg
 from .accel import AccelFirmware, format_line
@@ -31,6 +32,8 @@ from .plc import MotorLimits, PlatformPLC, validate_commands
 __all__ = ["PlatformConfig", "PlatformSimulator", "PlatformThread"]
 
 log = logging.getLogger(__name__)
+
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -288,75 +291,23 @@ class PlatformSimulator:
             plc.reset_fault()
 
 
-class PlatformThread:
+class PlatformThread(LoopThread[PlatformSimulator]):
     """A :class:`PlatformSimulator` on its own event loop in a daemon thread."""
 
+    NAME = "wave-platform"
+    LABEL = "the platform simulator"
+
     def __init__(self, config: PlatformConfig | None = None) -> None:
+        super().__init__()
         self.config = config or PlatformConfig(port=0)
-        self._ready = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._stop: asyncio.Event | None = None
-        self._sim: PlatformSimulator | None = None
-        self._error: BaseException | None = None
+
+    def _make(self) -> PlatformSimulator:
+        return PlatformSimulator(self.config)
 
     @property
     def sim(self) -> PlatformSimulator:
-        if self._sim is None:
-            raise RuntimeError("the platform simulator is not running")
-        return self._sim
+        return self.service
 
-    def start(self) -> Self:
-        if self._thread is not None:
-            return self
-        self._thread = threading.Thread(target=self._run, name="wave-platform", daemon=True)
-        self._thread.start()
-        if not self._ready.wait(10.0):
-            raise TimeoutError("the platform simulator did not start in time")
-        if self._error is not None:
-            raise RuntimeError(f"the platform simulator failed: {self._error}") from self._error
-        return self
-
-    def stop(self) -> None:
-        thread, self._thread = self._thread, None
-        if thread is None:
-            return
-        if self._loop is not None and self._stop is not None:
-            self._loop.call_soon_threadsafe(self._stop.set)
-        thread.join(timeout=10.0)
-        self._sim = None
-
-    def call(self, fn: Callable[[PlatformSimulator], Any]) -> Any:
+    def call(self, fn: Callable[..., T], *args: Any) -> T:
         """Run ``fn(sim)`` on the simulator's loop (ordering with scans) and return its result."""
-        if self._loop is None:
-            raise RuntimeError("the platform simulator is not running")
-
-        async def run() -> Any:
-            return fn(self.sim)
-
-        return asyncio.run_coroutine_threadsafe(run(), self._loop).result(timeout=10.0)
-
-    def __enter__(self) -> Self:
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
-
-    def _run(self) -> None:
-        try:
-            asyncio.run(self._main())
-        except BaseException as exc:  # reported to start()
-            self._error = exc
-            self._ready.set()
-
-    async def _main(self) -> None:
-        sim = PlatformSimulator(self.config)
-        await sim.start()
-        try:
-            self._loop = asyncio.get_running_loop()
-            self._stop = asyncio.Event()
-            self._sim = sim
-            self._ready.set()
-            await self._stop.wait()
-        finally:
-            await sim.close()
+        return super().call(fn, self.sim, *args)
