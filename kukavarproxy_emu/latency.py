@@ -179,6 +179,19 @@ class Scheduler:
             self.free_at = min(deadline, now)
 
 
+class _RunningLead:
+    """How early to aim (s): the median of the last ``window`` observed delays, capped."""
+
+    def __init__(self, cap: float, window: int) -> None:
+        self.cap = cap
+        self._seen: deque[float] = deque(maxlen=window)
+        self.value = 0.0
+
+    def add(self, delay: float) -> None:
+        self._seen.append(delay)
+        self.value = min(statistics.median(self._seen), self.cap)
+
+
 class DeadlineTimer:
     """Completes asyncio futures at absolute ``time.monotonic()`` deadlines.
 
@@ -203,9 +216,13 @@ class DeadlineTimer:
         self._heap: list[tuple[float, int, asyncio.AbstractEventLoop, asyncio.Future[None]]] = []
         self._seq = itertools.count()
         self._thread: threading.Thread | None = None
-        self._late: deque[float] = deque(maxlen=self.WINDOW)
-        #: How early the timer aims now (s): the median delay of the recent wake-ups.
-        self.lead = 0.0
+        #: How early the timer aims: the median delay of the recent wake-ups.
+        self._lead = _RunningLead(self.MAX_LEAD, self.WINDOW)
+
+    @property
+    def lead(self) -> float:
+        """How early the timer aims now (s)."""
+        return self._lead.value
 
     async def wait_until(self, deadline: float) -> None:
         """Return at ``deadline`` (``time.monotonic()`` seconds); at once if it has passed."""
@@ -229,8 +246,7 @@ class DeadlineTimer:
             await fut
         finally:
             backstop.cancel()
-        self._late.append(time.monotonic() - aim)
-        self.lead = min(statistics.median(self._late), self.MAX_LEAD)
+        self._lead.add(time.monotonic() - aim)
 
     def _run(self) -> None:
         with self._cond:
@@ -294,9 +310,8 @@ class ServiceQueue:
         #: How late each recent reply was computed after its deadline (s; the benchmarks'
         #: view of what delays replies: a busy loop, a slow read).
         self.late: deque[float] = deque(maxlen=10_000)
-        #: Recent computing times of a reply (s) and the lead taken from them.
-        self._costs: deque[float] = deque(maxlen=DeadlineTimer.WINDOW)
-        self.compute_lead = 0.0
+        #: The lead taken from the recent computing times of a reply.
+        self._compute = _RunningLead(MAX_COMPUTE_LEAD, DeadlineTimer.WINDOW)
 
     async def run(
         self,
@@ -320,7 +335,7 @@ class ServiceQueue:
         self.pending.append(deadline)
         _release_ticks(self._loop)
         try:
-            await TIMER.wait_until(deadline - self.compute_lead)
+            await TIMER.wait_until(deadline - self._compute.value)
         finally:
             self.pending.remove(deadline)
         woke = time.monotonic()
@@ -329,8 +344,7 @@ class ServiceQueue:
         reply = compute()
         self.last_reply = done = time.monotonic()
         self.late.append(done - deadline)
-        self._costs.append(done - woke)
-        self.compute_lead = min(statistics.median(self._costs), MAX_COMPUTE_LEAD)
+        self._compute.add(done - woke)
         return reply
 
 
