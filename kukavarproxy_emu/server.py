@@ -248,9 +248,7 @@ class _Connection(asyncio.BufferedProtocol):
 
     # -- request handling -----------------------------------------------------------------
 
-    def _dispatch(
-        self, frames: list[bytes], error: ProtocolError | None, arrival: float
-    ) -> None:
+    def _dispatch(self, frames: list[bytes], error: ProtocolError | None, arrival: float) -> None:
         emu = self.emu
         # Pre-9.0 bug: every reply to one TCP read carried the first request's id.
         legacy_id = _U16.unpack_from(frames[0])[0] if frames and emu.legacy_ids else None

@@ -477,8 +477,8 @@ class VariableStore:
         earlier, unfilled group it was in.
         """
         # a frozenset is taken as it is (the robot defers the same names every cycle)
-        group = names if isinstance(names, frozenset) else frozenset(
-            n.strip().upper() for n in names
+        group = (
+            names if isinstance(names, frozenset) else frozenset(n.strip().upper() for n in names)
         )
         entry = (group, fill)
         stale = self._stale

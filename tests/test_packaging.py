@@ -18,14 +18,33 @@ def test_fresh_wheel_install_exposes_only_our_top_level_names(tmp_path: Path) ->
     target = tmp_path / "site"
     # --no-build-isolation: hatchling comes with the test extras, so no download is needed.
     subprocess.run(
-        [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation",
-         "-w", str(wheels), str(ROOT)],
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "-q",
+            "--no-deps",
+            "--no-build-isolation",
+            "-w",
+            str(wheels),
+            str(ROOT),
+        ],
         check=True,
     )
     (wheel,) = wheels.glob("pyopenshowvar-*.whl")
     subprocess.run(
-        [sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--target", str(target),
-         str(wheel)],
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "install",
+            "-q",
+            "--no-deps",
+            "--target",
+            str(target),
+            str(wheel),
+        ],
         check=True,
     )
     top = {p.name for p in target.iterdir() if not p.name.endswith(".dist-info")}
@@ -34,7 +53,10 @@ def test_fresh_wheel_install_exposes_only_our_top_level_names(tmp_path: Path) ->
     # The console script points at the installed name, and the package imports from there.
     out = subprocess.run(
         [sys.executable, "-c", "import pyopenshowvar_apps.cli as c; print(c.__file__)"],
-        check=True, capture_output=True, text=True, cwd=tmp_path,
+        check=True,
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
         env={"PYTHONPATH": str(target), "PATH": "/usr/bin:/bin"},
     ).stdout
     assert out.strip().startswith(str(target))

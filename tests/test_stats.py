@@ -47,4 +47,6 @@ def test_percentile_matches_numpy(xs: list[float], q: float) -> None:
     s = AccessStats()
     for x in xs:
         s.record(x)
-    assert math.isclose(s.percentile(q), float(np.percentile(xs, q * 100)), rel_tol=1e-9, abs_tol=1e-12)
+    assert math.isclose(
+        s.percentile(q), float(np.percentile(xs, q * 100)), rel_tol=1e-9, abs_tol=1e-12
+    )

@@ -206,7 +206,9 @@ def _warn_behind(late: float) -> None:
     now = time.monotonic()
     if now - _last_warning >= WARN_EVERY:
         _last_warning = now
-        log.warning("IPO clock %.0f ms behind; skipping ticks (the machine is too busy)", late * 1e3)
+        log.warning(
+            "IPO clock %.0f ms behind; skipping ticks (the machine is too busy)", late * 1e3
+        )
 
 
 def release(loop: asyncio.AbstractEventLoop | None = None) -> None:

@@ -288,7 +288,9 @@ class DynamicPlant(Sensors):
                 self._build(payload)
                 self._set_gains(self._q_set)
             except ValueError as exc:  # MuJoCo refused the model: keep the previous one
-                log.warning("$LOAD %s cannot be simulated (%s); keeping the previous load", payload, exc)
+                log.warning(
+                    "$LOAD %s cannot be simulated (%s); keeping the previous load", payload, exc
+                )
                 self._payload = payload  # do not retry every cycle
             changed = True
         tool_m = frame_matrix(self._read_frame("$TOOL"))

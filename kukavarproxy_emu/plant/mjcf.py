@@ -56,7 +56,9 @@ def payload_of(value: object) -> Payload | None:
         return None
     cm, j = value.get("CM"), value.get("J")
     frame = tuple(_num(cm.get(k)) for k in "XYZABC") if isinstance(cm, Struct) else (0.0,) * 6
-    moments = tuple(max(_num(j.get(k)), 0.0) for k in "XYZ") if isinstance(j, Struct) else (0.0,) * 3
+    moments = (
+        tuple(max(_num(j.get(k)), 0.0) for k in "XYZ") if isinstance(j, Struct) else (0.0,) * 3
+    )
     return Payload(mass, frame, moments)  # type: ignore[arg-type]
 
 
@@ -149,7 +151,9 @@ def build_mjcf(
     if payload is not None and payload.mass > 0.0:
         inertia = " ".join(repr(max(float(v), _MIN_INERTIA)) for v in payload.inertia)
         lines.append(f'{pad}<body name="payload" {_pose(flange @ frame_matrix(payload.cm))}>')
-        lines.append(f'{pad}  <inertial pos="0 0 0" mass="{float(payload.mass)!r}" diaginertia="{inertia}"/>')
+        lines.append(
+            f'{pad}  <inertial pos="0 0 0" mass="{float(payload.mass)!r}" diaginertia="{inertia}"/>'
+        )
         lines.append(f"{pad}</body>")
     for j in reversed(range(6)):
         lines.append("  " * (j + 2) + "</body>")
