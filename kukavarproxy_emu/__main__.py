@@ -24,6 +24,8 @@ import threading
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from pyopenshowvar.extras import MissingExtraError
+
 from .cell import Cell, cell_configs
 from .config import (
     DEFAULT_PORT,
@@ -333,7 +335,8 @@ def main(argv: Sequence[str] | None = None, *, prog: str = "kukavarproxy-emu") -
         asyncio.run(serve(config, args.robots))
     except KeyboardInterrupt:
         pass
-    except (OSError, ValueError) as exc:  # port in use, bad --config, KRL syntax error
+    except (OSError, ValueError, MissingExtraError) as exc:
+        # port in use, bad --config, KRL syntax error, MuJoCo not installed
         print(f"kukavarproxy-emu: error: {exc}", file=sys.stderr, flush=True)
         return 1
     return 0

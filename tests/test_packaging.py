@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import zipfile
 from pathlib import Path
 
 import pytest
@@ -33,6 +34,18 @@ def test_fresh_wheel_install_exposes_only_our_top_level_names(tmp_path: Path) ->
         check=True,
     )
     (wheel,) = wheels.glob("pyopenshowvar-*.whl")
+    # A client-only install pulls numpy and nothing else; the rest comes with extras.
+    with zipfile.ZipFile(wheel) as archive:
+        (metadata,) = (n for n in archive.namelist() if n.endswith(".dist-info/METADATA"))
+        requires = [
+            line.removeprefix("Requires-Dist: ")
+            for line in archive.read(metadata).decode().splitlines()
+            if line.startswith("Requires-Dist: ")
+        ]
+    assert [r for r in requires if "extra ==" not in r] == ["numpy>=1.24"]
+    assert {"emulator", "apps", "gateway", "all", "test"} <= {
+        r.rpartition("extra == ")[2].strip("'\"") for r in requires if "extra ==" in r
+    }
     subprocess.run(
         [
             sys.executable,

@@ -11,7 +11,7 @@ Exit codes (also in ``kvp --help``) let shell scripts react precisely:
 ====  ==========================================================
 0     success
 1     unexpected internal error (a bug; ``KVP_DEBUG=1`` shows the traceback)
-2     usage error (bad option or argument, a VALUE that is not a KRL literal)
+2     usage error (bad option or argument, a VALUE that is not a KRL literal, a missing extra)
 3     cannot connect / connection lost (``discover``: nothing answered)
 4     timeout
 5     unknown variable or refused write
@@ -33,6 +33,7 @@ from typing import Annotated, Any
 import typer
 from typer.core import TyperGroup
 
+from pyopenshowvar.extras import explain
 from pyopenshowvar_apps.commands import LazyCommands
 from pyopenshowvar_apps.common import (
     EXIT_BUG,
@@ -255,6 +256,12 @@ def main() -> None:
     except Exception as exc:
         if os.environ.get("KVP_DEBUG"):
             raise
+        # a command whose optional extra is not installed (kvp gateway without asyncua, an
+        # --emulate run without MuJoCo) is a setup step to name, not a bug
+        missing = explain(exc) if isinstance(exc, ModuleNotFoundError) else None
+        if missing is not None:
+            print(f"kvp: {missing}", file=sys.stderr)
+            sys.exit(EXIT_USAGE)
         print(
             f"kvp: unexpected error {type(exc).__name__}: {exc} "
             "(a bug: KVP_DEBUG=1 shows the traceback for a report)",

@@ -19,6 +19,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Protocol
 
+from pyopenshowvar.extras import require
+
 from .contact import Obstacle
 
 if TYPE_CHECKING:  # the config imports this package: keep it light
@@ -64,9 +66,12 @@ def make_plant(
         return None
     if kind != "dynamic":
         raise ValueError(f"unknown plant {kind!r} (known: {', '.join(PLANTS)})")
-    from .dynamic import DynamicPlant  # MuJoCo only when needed
-
-    return DynamicPlant(
+    # MuJoCo only when needed, and a missing MuJoCo names the extra that brings it
+    dynamic = require(
+        "kukavarproxy_emu.plant.dynamic",
+        "the dynamic plant (the default; --plant ideal needs nothing more)",
+    )
+    plant: DynamicPlant = dynamic.DynamicPlant(
         store,
         model,
         ipo=ipo,
@@ -76,3 +81,4 @@ def make_plant(
         seed=seed,
         obstacles=obstacles,
     )
+    return plant

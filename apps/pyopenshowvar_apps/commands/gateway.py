@@ -51,11 +51,11 @@ def gateway(
     level = getattr(logging, log_level.upper(), None)
     if not isinstance(level, int):
         fail(EXIT_USAGE, f"--log-level {log_level!r}: use debug, info, warning or error")
-    try:
-        from pyopenshowvar_apps.gateway.cell import CellError, load_cell
-        from pyopenshowvar_apps.gateway.server import Gateway
-    except ImportError as exc:  # pragma: no cover - depends on the installation
-        fail(EXIT_USAGE, f"kvp gateway needs asyncua: pip install 'pyopenshowvar[gateway]' ({exc})")
+    # without asyncua this raises ModuleNotFoundError, which kvp's entry point turns into one
+    # line naming the `gateway` extra
+    from pyopenshowvar_apps.gateway.cell import CellError, load_cell
+    from pyopenshowvar_apps.gateway.server import Gateway
+
     try:
         config = load_cell(cell)
     except CellError as exc:
