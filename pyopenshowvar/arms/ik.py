@@ -13,7 +13,8 @@
   The seed is tried first; queries it does not solve within ``iterations`` steps get
   ``restarts`` random configurations at once, round after round, until solved or out of time.
   Among candidates that converge together the one nearest ``preferred`` (default: the seed)
-  wins; for redundant arms ``preferred`` also pulls the solution in the null space.
+  wins; for a redundant arm, a solution is then moved towards ``preferred`` in the null space
+  of the task (kept only if it still meets the tolerance and got nearer).
 
 Errors are measured like KDL / TRAC-IK: each component of the twist between target and
 reached frame (position in metres, rotation vector in radians) within ``tol``. ``timeout``
@@ -40,11 +41,12 @@ __all__ = ["IKResult", "solve"]
 #: The damping λ = k·½‖e‖² + λ₀ (e in metres and radians): Sugihara's form with k = 0.1,
 #: which halved the steps to convergence on the catalogue arms compared with k = 1.
 LAMBDA_K = 0.1
-LAMBDA0 = 1e-5
+LAMBDA0 = 1e-8
 #: Candidates kept alive in all while only a few queries are left (numpy batches are cheap).
 POOL = 128
-#: Null-space gain towards ``preferred`` for redundant arms (per step, 0..1).
-NULL_GAIN = 0.1
+#: Redundancy resolution towards ``preferred``: null-space steps and gain per step (0..1).
+NULL_STEPS = 30
+NULL_GAIN = 0.2
 
 
 @dataclass(frozen=True)
@@ -227,13 +229,9 @@ def _numeric(
     # internal units: radians and metres, so position (m) and rotation (rad) errors mix
     scale = np.where(rev, math.degrees(1.0), 1000.0)
     lo, hi = arm.lower / scale, arm.upper / scale
-    tgt_p = flat[:, :3, 3] / 1000.0
-    tgt_r = flat[:, :3, :3]
     rows = 3 if pos_only else 6
     near = (seeds if pref is None else pref) / scale
-    null_pull = pref is not None and n > rows
     eye = np.eye(n)
-    eff_r, eff_p = eff[:3, :3], eff[:3, 3]
 
     best = seeds / scale
     solved = np.zeros(n_q, dtype=bool)
@@ -251,7 +249,7 @@ def _numeric(
             # few unsolved queries left: numpy's per-call cost dominates, so each gets more
             # candidates per round (a pool of POOL in all) instead of more rounds
             waiting = len(np.unique(b.owner))
-            per = max(restarts, min(POOL // max(waiting, 1), 4 * POOL // 2))
+            per = max(restarts, min(POOL // max(waiting, 1), POOL))
             again = np.concatenate(
                 [
                     np.repeat(b.owner[old & b.seed], per),
@@ -260,62 +258,93 @@ def _numeric(
             )
             b.keep(~old)
             b.add(rng.uniform(lo, hi, size=(len(again), n)), again)
-        if arm._all_revolute:
-            frames = arm._chain(np.sin(b.q), np.cos(b.q))
-        else:
-            frames = arm._chain(
-                np.where(rev, np.sin(b.q), b.q * 1000.0), np.where(rev, np.cos(b.q), 0.0)
-            )
-        last = frames[:, -1]
-        tcp_r = last[:, :3, :3] @ eff_r
-        tcp_p = (last[:, :3, :3] @ eff_p + last[:, :3, 3]) / 1000.0
-        e = np.empty((len(b.owner), rows))
-        e[:, :3] = tgt_p[b.owner] - tcp_p
-        if pos_only:
-            done = np.max(np.abs(e), axis=1) <= tol
-        else:
-            # R_err = R_target·R_tcpᵀ; its skew part is sinθ·axis = the rotation vector to
-            # 1e-10 relative at the tolerance (the final check in solve() uses the true log);
-            # the trace guard keeps θ ≈ π (skew part ≈ 0 too) from counting as converged
-            rt = tgt_r[b.owner] @ np.swapaxes(tcp_r, 1, 2)
-            e[:, 3] = 0.5 * (rt[:, 2, 1] - rt[:, 1, 2])
-            e[:, 4] = 0.5 * (rt[:, 0, 2] - rt[:, 2, 0])
-            e[:, 5] = 0.5 * (rt[:, 1, 0] - rt[:, 0, 1])
-            done = (np.max(np.abs(e), axis=1) <= tol) & (
-                rt[:, 0, 0] + rt[:, 1, 1] + rt[:, 2, 2] > 1.0
-            )
+        e, jt, trace = _task(arm, b.q, flat[b.owner], pos_only, eff)
+        # the skew part of R_err is sinθ·axis, the rotation vector to 1e-10 relative at the
+        # tolerance (solve() checks the true log at the end); the trace guard keeps θ ≈ π,
+        # whose skew part is ≈ 0 too, from counting as converged
+        done = (np.max(np.abs(e), axis=1) <= tol) & (trace > 1.0)
         if np.any(done):
             _settle(done, b.owner, b.q, best, solved, near)
             live = ~solved[b.owner]
             b.keep(live)
-            frames, tcp_p, e = frames[live], tcp_p[live], e[live]
+            e, jt = e[live], jt[live]
             if not len(b.owner):
                 break
-        # geometric Jacobian (transposed, internal units): one row per joint, [v (m), ω]
-        w = arm._world_axes(frames)
-        rr = tcp_p[:, None, :] - frames[..., :3, 3] / 1000.0
-        lin = w[..., [1, 2, 0]] * rr[..., [2, 0, 1]] - w[..., [2, 0, 1]] * rr[..., [1, 2, 0]]
-        if arm._all_revolute:
-            jt = lin if rows == 3 else np.concatenate([lin, w], axis=-1)
-        else:
-            lin = np.where(rev[:, None], lin, w)
-            jt = (
-                lin if rows == 3 else np.concatenate([lin, np.where(rev[:, None], w, 0.0)], axis=-1)
-            )
         lam = LAMBDA_K * 0.5 * np.einsum("ki,ki->k", e, e) + LAMBDA0
         h = jt @ np.swapaxes(jt, 1, 2) + lam[:, None, None] * eye
         dq = np.linalg.solve(h, jt @ e[..., None])[..., 0]
-        if null_pull:
-            # pull towards the preferred posture without disturbing the task: (I - J⁺J)·k·Δ
-            j = np.swapaxes(jt, 1, 2)
-            pull = NULL_GAIN * (near[b.owner] - b.q)
-            fix = np.linalg.solve(j @ jt + 1e-9 * np.eye(rows), j @ pull[..., None])
-            dq += pull - (jt @ fix)[..., 0]
         b.q = _wrap_clip(b.q + dq, lo, hi, rev)
         b.age += 1
     alive = b.owner[~solved[b.owner]]
     best[alive] = b.q[~solved[b.owner]]
+    if pref is not None and n > rows and np.any(solved):
+        idx = np.flatnonzero(solved)
+        best[idx] = _towards(
+            arm, best[idx], flat[idx], pref[idx] / scale, pos_only, eff, tol, lo, hi
+        )
     return best * scale, solved
+
+
+def _towards(
+    arm: Arm,
+    q: FloatArray,
+    flat: FloatArray,
+    pref: FloatArray,
+    pos_only: bool,
+    eff: FloatArray,
+    tol: float,
+    lo: FloatArray,
+    hi: FloatArray,
+) -> FloatArray:
+    """Redundancy resolution: move solved configurations (internal units) towards ``pref``
+    in the null space of the task, correcting the task error on the way (a projected
+    gradient step plus a Gauss-Newton step per iteration). A query keeps its new values only
+    if they still meet the tolerance and are nearer ``pref``."""
+    rev = arm.revolute
+    rows = 3 if pos_only else 6
+    start = q.copy()
+    for _ in range(NULL_STEPS):
+        e, jt, _ = _task(arm, q, flat, pos_only, eff)
+        j = np.swapaxes(jt, 1, 2)
+        jjt = j @ jt + 1e-9 * np.eye(rows)
+        pull = NULL_GAIN * (pref - q)
+        # J⁺·e (task correction) + (I − J⁺J)·pull (null-space motion), J⁺ = Jᵀ(JJᵀ)⁻¹
+        fix = np.linalg.solve(jjt, e[..., None] - j @ pull[..., None])
+        q = _wrap_clip(q + pull + (jt @ fix)[..., 0], lo, hi, rev)
+    e, _, trace = _task(arm, q, flat, pos_only, eff)
+    good = (np.max(np.abs(e), axis=1) <= tol) & (trace > 1.0)
+    good &= np.sum((q - pref) ** 2, axis=1) < np.sum((start - pref) ** 2, axis=1)
+    return np.where(good[:, None], q, start)
+
+
+def _task(
+    arm: Arm, q: FloatArray, flat: FloatArray, pos_only: bool, eff: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """At configurations ``q`` (internal units) for targets ``flat``: the task error
+    (position m, then the skew part of R_target·R_tcpᵀ), the transposed geometric Jacobian
+    (one row per joint, per rad / per m) and the trace of R_err (3 for position-only)."""
+    rev = arm.revolute
+    if arm._all_revolute:
+        frames = arm._chain(np.sin(q), np.cos(q))
+    else:
+        frames = arm._chain(np.where(rev, np.sin(q), q * 1000.0), np.where(rev, np.cos(q), 0.0))
+    tcp = frames[:, -1] @ eff
+    p = tcp[:, :3, 3] / 1000.0
+    e = flat[:, :3, 3] / 1000.0 - p
+    w = arm._world_axes(frames)
+    rr = p[:, None, :] - frames[..., :3, 3] / 1000.0
+    lin = np.cross(w, rr)
+    if not arm._all_revolute:
+        lin = np.where(rev[:, None], lin, w)
+    if pos_only:
+        return e, lin, np.full(len(q), 3.0)
+    rt = flat[:, :3, :3] @ np.swapaxes(tcp[:, :3, :3], 1, 2)
+    er = np.stack(
+        [rt[:, 2, 1] - rt[:, 1, 2], rt[:, 0, 2] - rt[:, 2, 0], rt[:, 1, 0] - rt[:, 0, 1]], axis=1
+    )
+    ang = w if arm._all_revolute else np.where(rev[:, None], w, 0.0)
+    trace = rt[:, 0, 0] + rt[:, 1, 1] + rt[:, 2, 2]
+    return np.concatenate([e, 0.5 * er], axis=1), np.concatenate([lin, ang], axis=-1), trace
 
 
 def _settle(
