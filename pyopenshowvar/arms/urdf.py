@@ -8,7 +8,8 @@ wants every mesh file on disk. It is imported only here, when a ``.urdf`` file i
 The serial chain runs from the root link to ``tip`` (default: ``tool0``, else ``flange``,
 else the end of the longest chain of moving joints). Fixed joints before the first moving
 joint become the arm's ``base``, fixed joints after the last one its ``flange``, and masses
-of links hanging on fixed joints are lumped into the moving link they ride on. A continuous
+of links bolted on by fixed joints (motors, flanges, tools) are lumped into the link they
+ride on. A continuous
 joint becomes a revolute joint with limits ±180°. Units change from metres and radians to
 the toolkit's millimetres and degrees.
 
@@ -76,7 +77,7 @@ def load_urdf(path: str | Path, *, tip: str | None = None, name: str | None = No
     """An arm from a URDF file (needs the ``urdf`` extra: ``pip install pyopenshowvar[urdf]``)."""
     p = Path(path)
     try:
-        import yourdfpy  # type: ignore[import-untyped]
+        import yourdfpy
     except ImportError as exc:  # pragma: no cover - depends on the environment
         raise ArmFileError(
             f"{p}: reading URDF needs yourdfpy (pip install 'pyopenshowvar[urdf]')"
@@ -120,27 +121,27 @@ def load_urdf(path: str | Path, *, tip: str | None = None, name: str | None = No
         raise ArmFileError(f"{p}: no joint chain to {want!r}")
     chain = chains[0]
 
+    def body(link: str) -> Inertial | None:
+        """Mass of ``link`` and of everything bolted to it by fixed joints, in its frame."""
+        total = _link_inertial(links[link])
+        for j in children.get(link, []):
+            if j.type == "fixed":
+                org = np.eye(4) if j.origin is None else np.array(j.origin, dtype=np.float64)
+                org[:3, 3] *= 1000.0
+                total = _combine(total, _moved(body(j.child), org))
+        return total
+
     joints: list[Joint] = []
     pending = np.eye(4)
     base = None
-    lumped: Inertial | None = None  # mass riding on the current moving link, its frame
-    base_inertial = _link_inertial(links[roots[0]])
     for j in chain:
         org = np.eye(4) if j.origin is None else np.array(j.origin, dtype=np.float64)
         org[:3, 3] *= 1000.0
-        child_in = _link_inertial(links[j.child])
         if j.type == "fixed":
             pending = pending @ org
-            target = _moved(child_in, pending)
-            if joints:
-                lumped = _combine(lumped, target)
-            else:
-                base_inertial = _combine(base_inertial, target)
             continue
         if j.type not in ("revolute", "continuous", "prismatic"):
             raise ArmFileError(f"{p}: joint {j.name!r}: type {j.type!r} is not a serial-arm joint")
-        if joints:
-            joints[-1] = _with_inertial(joints[-1], lumped)
         if base is None:
             base, pending = pending, np.eye(4)
         revolute = j.type != "prismatic"
@@ -158,21 +159,19 @@ def load_urdf(path: str | Path, *, tip: str | None = None, name: str | None = No
         try:
             joints.append(
                 Joint(j.name, "revolute" if revolute else "prismatic", pending @ org, axis,
-                      lower, upper, speed, math.nan, effort, None)
+                      lower, upper, speed, math.nan, effort, body(j.child))
             )  # fmt: skip
         except ValueError as exc:
             raise ArmFileError(f"{p}: {exc}") from exc
         pending = np.eye(4)
-        lumped = child_in
     if not joints:
         raise ArmFileError(f"{p}: no moving joints on the chain to {chain[-1].child!r}")
-    joints[-1] = _with_inertial(joints[-1], lumped)
     arm = Arm(
         name or robot.name or p.stem,
         tuple(joints),
         base=base if base is not None else np.eye(4),
         flange=pending,
-        base_inertial=base_inertial,
+        base_inertial=body(roots[0]),
         source=Source(text=f"URDF file {p.name}"),
     )
     model = derive_robot_model(arm)
@@ -181,12 +180,6 @@ def load_urdf(path: str | Path, *, tip: str | None = None, name: str | None = No
     from dataclasses import replace
 
     return replace(arm, kuka=model)
-
-
-def _with_inertial(joint: Joint, inertial: Inertial | None) -> Joint:
-    from dataclasses import replace
-
-    return replace(joint, inertial=inertial)
 
 
 def _fmt(v: float) -> str:
