@@ -88,6 +88,16 @@ class IKResult:
         return self.q
 
 
+_RNG: list[np.random.Generator] = []
+
+
+def _default_rng() -> np.random.Generator:
+    """One generator for the process, seeded with a constant, so restarts are reproducible."""
+    if not _RNG:
+        _RNG.append(np.random.default_rng(0x1C0DE))
+    return _RNG[0]
+
+
 def _targets(target: npt.ArrayLike) -> tuple[FloatArray, bool]:
     t = np.asarray(target, dtype=np.float64)
     if t.shape[-2:] == (4, 4):
@@ -110,7 +120,7 @@ def solve(
     tool: npt.ArrayLike | None = None,
     method: Literal["auto", "closed", "numeric"] = "auto",
     tol: float = 1e-5,
-    timeout: float = 0.005,
+    timeout: float = 0.05,
     iterations: int = 20,
     restarts: int = 8,
     rng: np.random.Generator | None = None,
@@ -123,6 +133,8 @@ def solve(
     """
     if not (timeout > 0.0 and math.isfinite(timeout)):
         raise ValueError(f"timeout must be > 0 s, got {timeout}")
+    # numpy.random loads on first use (0.1 s on a busy machine): before the clock starts
+    gen = rng or _default_rng()
     deadline_start = clock()
     mats, pos_only = _targets(target)
     lead = mats.shape[:-2]
@@ -148,7 +160,7 @@ def solve(
         eff = arm.flange if tool_m is None else arm.flange @ tool_m
         deadline = deadline_start + timeout * max(n_q, 1)
         q, ok = _numeric(arm, flat, pos_only, seeds, pref, eff, tol, deadline, clock,
-                         iterations, restarts, rng or np.random.default_rng())  # fmt: skip
+                         iterations, restarts, gen)  # fmt: skip
         name = "numeric"
     reached = arm.fk(np.nan_to_num(q), tool_m)
     pe = np.max(np.abs(reached[:, :3, 3] - flat[:, :3, 3]), axis=-1)

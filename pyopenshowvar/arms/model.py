@@ -353,7 +353,7 @@ class Arm:
         tool: npt.ArrayLike | None = None,
         method: Literal["auto", "closed", "numeric"] = "auto",
         tol: float = 1e-5,
-        timeout: float = 0.005,
+        timeout: float = 0.05,
         errors: Literal["raise", "nan"] = "raise",
         rng: np.random.Generator | None = None,
     ) -> FloatArray:
