@@ -349,35 +349,19 @@ class Arm:
         target: npt.ArrayLike,
         seed: npt.ArrayLike | None = None,
         *,
-        preferred: npt.ArrayLike | None = None,
-        tool: npt.ArrayLike | None = None,
-        method: Literal["auto", "closed", "numeric"] = "auto",
-        tol: float = 1e-5,
-        timeout: float = 0.05,
         errors: Literal["raise", "nan"] = "raise",
-        rng: np.random.Generator | None = None,
+        **options: Any,
     ) -> FloatArray:
-        """Joint values reaching ``target`` (see :func:`pyopenshowvar.arms.ik.solve`).
+        """Joint values reaching ``target``: a 4×4 pose, XYZABC ``(…, 6)`` or a position XYZ
+        ``(…, 3)`` (position-only IK), each possibly batched; returns ``(…, dof)``.
 
-        ``target``: a 4×4 pose, XYZABC ``(…, 6)`` or a position XYZ ``(…, 3)`` (position-only
-        IK), each possibly batched. Returns ``(…, dof)``; raises
-        :class:`~pyopenshowvar.kinematics.UnreachableError` when a target is not solved
-        (``errors="nan"``: NaN rows instead).
+        ``options`` are those of :func:`pyopenshowvar.arms.ik.solve` (``preferred``, ``tool``,
+        ``method``, ``tol``, ``timeout``, ``rng``, ...). An unsolved target raises
+        :class:`~pyopenshowvar.kinematics.UnreachableError` (``errors="nan"``: NaN rows).
         """
         from .ik import solve
 
-        res = solve(
-            self,
-            target,
-            seed,
-            preferred=preferred,
-            tool=tool,
-            method=method,
-            tol=tol,
-            timeout=timeout,
-            rng=rng,
-        )
-        return res.value(errors)
+        return solve(self, target, seed, **options).value(errors)
 
     def solve_ik(
         self, target: npt.ArrayLike, seed: npt.ArrayLike | None = None, **kw: Any
