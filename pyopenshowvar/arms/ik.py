@@ -206,6 +206,42 @@ def _wrap_clip(
     return np.clip(q, lo, hi)
 
 
+def _bounded(
+    q: FloatArray,
+    dq: FloatArray,
+    jt: FloatArray,
+    e: FloatArray,
+    lam: FloatArray,
+    lo: FloatArray,
+    hi: FloatArray,
+    rev: npt.NDArray[np.bool_],
+) -> FloatArray:
+    """Active-set correction of steps that run into a limit (no ± 360° way round).
+
+    Clipping alone leaves the other joints' step computed as if the blocked joint had moved,
+    and the solver stalls on solutions that lie on a limit (a pose taken with axes at their
+    stops). Here the blocked joints go to their limit and the rest is solved again without them.
+    """
+    new = q + dq
+    two_pi = 2.0 * math.pi
+    blocked = ((new < lo) & ~(rev & (new + two_pi <= hi))) | (
+        (new > hi) & ~(rev & (new - two_pi >= lo))
+    )
+    rows = np.flatnonzero(np.any(blocked, axis=1))
+    if not len(rows):
+        return dq
+    blk = blocked[rows]
+    to_limit = np.where(new[rows] < lo, lo - q[rows], hi - q[rows])
+    jt_f = jt[rows] * ~blk[..., None]  # blocked joints' rows of Jᵀ removed
+    # the task left after moving the blocked joints to their limits
+    rest = e[rows] - np.einsum("kni,kn->ki", jt[rows], np.where(blk, to_limit, 0.0))
+    h = jt_f @ np.swapaxes(jt_f, 1, 2) + lam[rows, None, None] * np.eye(q.shape[1])
+    free = np.linalg.solve(h, jt_f @ rest[..., None])[..., 0]
+    out = dq.copy()
+    out[rows] = np.where(blk, to_limit, free)
+    return out
+
+
 class _Batch:
     """The live candidates: values (internal units), owning query, age, seed flag, targets."""
 
@@ -294,6 +330,7 @@ def _numeric(
         lam = LAMBDA_K * 0.5 * ee + LAMBDA0
         h = jt @ np.swapaxes(jt, 1, 2) + lam[:, None, None] * eye
         dq = np.linalg.solve(h, jt @ e[..., None])[..., 0]
+        dq = _bounded(b.q, dq, jt, e, lam, lo, hi, rev)
         b.q = _wrap_clip(b.q + dq, lo, hi, rev)
         b.age += 1
     alive = b.owner[~solved[b.owner]]
