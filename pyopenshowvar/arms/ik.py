@@ -6,10 +6,12 @@
 * **Closed form** (``arm.kuka``, KUKA six-axis arms with a spherical wrist, full poses):
   every solution inside the limits is enumerated (:func:`~pyopenshowvar.kinematics.inverse`)
   and the one nearest the seed wins. A pose it does not solve has no solution.
-* **Numeric** (every other case): damped least squares / Levenberg–Marquardt with the
-  damping of Sugihara (λ = ½‖e‖² + λ₀, "solvability-unconcerned", so targets at or beyond the
-  workspace boundary do not blow up), joint limits kept by projection (a revolute joint first
-  tries its value ± 360°), all candidates of all queries stepped together as numpy batches.
+* **Numeric** (every other case): Levenberg–Marquardt steps ``(JᵀJ + λI)⁻¹Jᵀe`` with
+  Sugihara's damping λ = k·½‖e‖² + λ₀ ("solvability-unconcerned": large far from the target,
+  so targets at or beyond the workspace boundary do not blow up; vanishing near it). Joint
+  limits are kept by projection (a revolute joint first tries its value ± 360°) and an
+  active set: joints a step would push through a limit stop there and the others are solved
+  again without them. All candidates of all queries are stepped together as numpy batches.
   The seed is tried first; queries it does not solve within ``iterations`` steps get
   ``restarts`` random configurations at once, round after round, until solved or out of time.
   Among candidates that converge together the one nearest ``preferred`` (default: the seed)
@@ -18,7 +20,8 @@
 
 Errors are measured like KDL / TRAC-IK: each component of the twist between target and
 reached frame (position in metres, rotation vector in radians) within ``tol``. ``timeout``
-is wall-clock seconds per query: a batch of N queries stops after N·timeout.
+is seconds per query (wall clock unless ``clock`` says otherwise): a batch of N queries stops
+after N·timeout.
 """
 
 from __future__ import annotations
@@ -169,8 +172,7 @@ def solve(
         re = np.max(
             np.abs(rotation_log(flat[:, :3, :3] @ np.swapaxes(reached[:, :3, :3], 1, 2))), axis=-1
         )
-    if use_closed:
-        ok &= (pe <= tol * 1000.0) & (re <= tol)
+    ok &= (pe <= tol * 1000.0) & (re <= tol)  # the true rotation log, for both methods
     return IKResult(
         q.reshape(*lead, arm.dof),
         ok.reshape(lead),
@@ -243,7 +245,7 @@ def _bounded(
 
 
 class _Batch:
-    """The live candidates: values (internal units), owning query, age, seed flag, targets."""
+    """The live candidates: values (internal units), owning query, age and seed flag."""
 
     def __init__(
         self, q: FloatArray, owner: npt.NDArray[np.intp], seed: npt.NDArray[np.bool_]
