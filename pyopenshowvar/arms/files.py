@@ -23,7 +23,7 @@ from ..kinematics.frames import FloatArray
 from ..kinematics.model import RobotModel
 from .dh import DHRow, dh_chain
 from .errors import ArmFileError
-from .kuka import derive_robot_model, from_robot_model
+from .kuka import from_robot_model, with_closed_form
 from .model import Arm, Inertial, Joint, Source
 from .spatial import origin
 
@@ -252,22 +252,16 @@ def arm_from_dict(data: Mapping[str, Any], file: str = "<arm>", key: str = "") -
         raise ctx.fail("", f"'closed_form' must be true or false, got {want!r}")
     if want is False:
         return arm
-    derived = derive_robot_model(arm)
-    if want and derived is None:
+    arm = with_closed_form(arm)
+    if want and arm.kuka is None:
         raise ctx.fail("", "closed_form = true, but the chain is not a KUKA-layout 6R arm")
-    return arm if derived is None else _with_kuka(arm, derived)
-
-
-def _with_kuka(arm: Arm, model: RobotModel) -> Arm:
-    from dataclasses import replace
-
-    return replace(arm, kuka=model)
+    return arm
 
 
 def _builtin(ctx: _Ctx, data: Mapping[str, Any], meta: dict[str, Any]) -> Arm:
     from .. import kinematics
 
-    ctx.keys(data, {"builtin", "name", "family", "model_name", "source"}, "")
+    ctx.keys(data, {"builtin", "family", "model_name", "source"}, "")
     ref = ctx.text(data, "builtin", "")
     model = getattr(kinematics, ref, None)
     if not isinstance(model, RobotModel):

@@ -25,7 +25,7 @@ from ..kinematics.model import RobotModel
 from .dh import DHRow, dh_chain
 from .model import Arm, Inertial, Joint, Source
 
-__all__ = ["derive_robot_model", "from_robot_model"]
+__all__ = ["derive_robot_model", "from_robot_model", "with_closed_form"]
 
 log = logging.getLogger(__name__)
 
@@ -179,6 +179,14 @@ def derive_robot_model(arm: Arm, *, samples: int = 64, tol_mm: float = 1e-8) -> 
         log.debug("%s: KUKA-layout guess does not reproduce the chain", arm.name)
         return None
     return model
+
+
+def with_closed_form(arm: Arm) -> Arm:
+    """The arm with its ``kuka`` model set when it has the KUKA layout (else unchanged)."""
+    from dataclasses import replace
+
+    model = derive_robot_model(arm)
+    return arm if model is None else replace(arm, kuka=model)
 
 
 def _clean(t: FloatArray) -> FloatArray:

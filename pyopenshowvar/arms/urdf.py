@@ -28,7 +28,7 @@ import numpy as np
 
 from ..kinematics.frames import FloatArray
 from .errors import ArmFileError
-from .kuka import derive_robot_model
+from .kuka import with_closed_form
 from .model import Arm, Inertial, Joint, Source
 from .spatial import rpy_from_matrix
 
@@ -174,12 +174,7 @@ def load_urdf(path: str | Path, *, tip: str | None = None, name: str | None = No
         base_inertial=body(roots[0]),
         source=Source(text=f"URDF file {p.name}"),
     )
-    model = derive_robot_model(arm)
-    if model is None:
-        return arm
-    from dataclasses import replace
-
-    return replace(arm, kuka=model)
+    return with_closed_form(arm)
 
 
 def _fmt(v: float) -> str:
