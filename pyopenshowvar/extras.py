@@ -11,6 +11,7 @@ emulator    MuJoCo, for the emulator's dynamic plant (``--plant ideal`` needs no
 apps        the ``kvp`` command line and its applications (CLI, REPL, monitor, web pad,
             case studies, wave platform) and the ``emulator`` extra for ``--emulate``
 gateway     ``apps`` plus asyncua, for ``kvp gateway``
+urdf        yourdfpy, to load an arm from a URDF file (the shipped catalogue needs nothing)
 all         all of the above
 ==========  ==============================================================================
 
@@ -48,6 +49,7 @@ EXTRA_OF: dict[str, str] = {
         "apps",
     ),
     "asyncua": "gateway",
+    "yourdfpy": "urdf",
     "pygame": "gamepad",
 }
 

@@ -33,6 +33,7 @@ BENCH = Path(__file__).resolve().parents[1] / "bench"
         ("snapshot.py", "20 variables: `read_snapshot`"),
         ("cell_cpu.py", "CPU per robot, 2 robots, moving"),
         ("sync_read_cost.py", "critical path"),
+        ("ik.py", "solved, numeric batched"),
     ],
 )
 def test_benchmark_runs_quick(script: str, expect: str) -> None:
