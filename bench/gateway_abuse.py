@@ -37,7 +37,6 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _common import Row, base_parser, machine_info, print_rows, write_json
-
 from pyopenshowvar_apps.gateway.abuse import (
     CellProcess,
     GatewayProcess,
@@ -243,9 +242,7 @@ def main() -> None:
             r = asyncio.run(hostile(args.robots, seconds, folder))
             extra["hostile"] = r
             rows += _rows("hostile robot", r)
-            rows.append(
-                Row("hostile robot: 60 KB replies sent", r["hostile"]["big_replies"], "")
-            )
+            rows.append(Row("hostile robot: 60 KB replies sent", r["hostile"]["big_replies"], ""))
         if args.only in (None, "logins"):
             r = asyncio.run(logins(args.robots, seconds, folder, rounds))
             extra["logins"] = r
@@ -260,8 +257,12 @@ def main() -> None:
                     f"errors {f['errors']}",
                 )
             )
-            rows.append(Row("refusal time, existing user, p50", percentile(o["known_ms"], 50), "ms"))
-            rows.append(Row("refusal time, unknown user, p50", percentile(o["unknown_ms"], 50), "ms"))
+            rows.append(
+                Row("refusal time, existing user, p50", percentile(o["known_ms"], 50), "ms")
+            )
+            rows.append(
+                Row("refusal time, unknown user, p50", percentile(o["unknown_ms"], 50), "ms")
+            )
     print_rows("kvp gateway under attack", rows)
     write_json(args.json, "Gateway abuse", rows, extra)
 

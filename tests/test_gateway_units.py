@@ -11,12 +11,7 @@ from hypothesis import strategies as st
 from pyopenshowvar_apps.gateway.cell import CellError, load_cell, parse_cell
 from pyopenshowvar_apps.gateway.mapping import poll_values, task_state
 from pyopenshowvar_apps.gateway.poller import _next_slot
-from pyopenshowvar_apps.gateway.security import (
-    GatewayUserManager,
-    check_hash_format,
-    hash_password,
-    verify_password,
-)
+from pyopenshowvar_apps.gateway.security import check_hash_format, hash_password, verify_password
 
 from pyopenshowvar import KrlEnum, parse_value
 
@@ -82,8 +77,8 @@ def test_a_cell_file_on_disk(tmp_path: Path) -> None:
     c = load_cell(path)
     assert c.name == "line-1" and c.security.pki_dir == tmp_path / "pki"
     r = c.robots[0]
-    assert r.exposed == ("$OV_JOG", "$OV_PRO") and r.is_writable("$ov_pro")
-    assert not r.is_writable("$OV_JOG")
+    assert r.exposed == ("$OV_JOG", "$OV_PRO") and r.writable_name("$ov_pro") == "$OV_PRO"
+    assert r.writable_name("$OV_JOG") is None
     assert r.snapshots[0].members == {"$AXIS_ACT": "AX"}
     path.write_text("[cell\n")
     with pytest.raises(CellError, match="not valid TOML"):
@@ -97,22 +92,6 @@ def test_password_hashes_verify_only_their_password(password: str) -> None:
     assert check_hash_format(stored) is None
     assert verify_password(password, stored)
     assert not verify_password(password + "x", stored)
-
-
-def test_user_manager_knows_anonymous_only_when_told() -> None:
-    users = parse_cell(
-        cell(
-            security={
-                "users": [{"name": "op", "password_hash": hash_password("pw", iterations=10_000)}]
-            }
-        )
-    ).security.users
-    secure = GatewayUserManager(users, anonymous=False)
-    assert secure.get_user(None) is None
-    assert secure.get_user(None, "op", "bad") is None
-    assert secure.get_user(None, "nobody", "pw") is None
-    assert secure.get_user(None, "op", "pw").name == "op"
-    assert GatewayUserManager((), anonymous=True).get_user(None).name == "anonymous"
 
 
 def test_poll_values_map_krc_variables_onto_the_robotics_model() -> None:

@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import functools
+import itertools
 import json
 import os
 import subprocess
@@ -426,7 +427,7 @@ class Watch:
         gaps: list[float] = []
         for stamps in self._stamps.values():
             ordered = sorted(stamps)
-            gaps += [(b - a).total_seconds() * 1e3 for a, b in zip(ordered, ordered[1:])]
+            gaps += [(b - a).total_seconds() * 1e3 for a, b in itertools.pairwise(ordered)]
         return sorted(gaps)
 
     def updates(self) -> dict[str, int]:
