@@ -38,13 +38,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _common import Row, base_parser, machine_info, print_rows, write_json
 from pyopenshowvar_apps.gateway.abuse import (
+    CLIENT_URI,
     CellProcess,
     GatewayProcess,
     HostileProcess,
     LoginTally,
     Watch,
-    _client_certificate,
+    cell_file,
+    client_certificate,
     login_once,
+    open_client,
     percentile,
 )
 from pyopenshowvar_apps.gateway.cell import CellError, parse_cell
@@ -54,18 +57,7 @@ SECRET = "correct horse battery"
 USER = "scada"
 
 
-def _cell(folder: Path, ports: list[int], *, hostile: int | None, security: str) -> Path:
-    text = f'[cell]\nname = "abuse"\nendpoint = "opc.tcp://127.0.0.1:0"\n{security}'
-    for i, port in enumerate(ports, 1):
-        text += f'[[robot]]\nname = "r{i}"\nhost = "127.0.0.1"\nport = {port}\n'
-    if hostile is not None:
-        text += f'[[robot]]\nname = "hostile"\nhost = "127.0.0.1"\nport = {hostile}\npoll_hz = 50\n'
-    path = folder / "cell.toml"
-    path.write_text(text)
-    return path
-
-
-def _security(folder: Path, extra: str = "") -> str:
+def _security(extra: str = "") -> str:
     digest = hash_password(SECRET)
     return f'[security]\nusers = [{{ name = "{USER}", password_hash = "{digest}" }}]\n{extra}'
 
@@ -84,24 +76,6 @@ def _supports(key: str, value: str) -> bool:
     return True
 
 
-async def _client(gw: GatewayProcess, folder: Path) -> Any:
-    from asyncua import Client, ua
-    from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
-
-    client = Client(gw.url, timeout=30)
-    if gw.fingerprint:
-        cert, key = _client_certificate(folder, "urn:pyopenshowvar:abuse-client")
-        client.application_uri = "urn:pyopenshowvar:abuse-client"
-        await client.set_security(
-            SecurityPolicyBasic256Sha256, str(cert), str(key),
-            mode=ua.MessageSecurityMode.SignAndEncrypt,
-        )  # fmt: skip
-        client.set_user(USER)
-        client.set_password(SECRET)
-    await client.connect()
-    return client
-
-
 async def _phase(gw: GatewayProcess, watch: Watch, seconds: float) -> dict[str, Any]:
     gw.reset_peak()
     watch.mark()
@@ -113,18 +87,17 @@ async def _phase(gw: GatewayProcess, watch: Watch, seconds: float) -> dict[str, 
     return result
 
 
-async def hostile(robots: int, seconds: float, folder: Path) -> dict[str, Any]:
-    cell_proc, bad = CellProcess(robots, folder), HostileProcess()
-    gw = GatewayProcess(
-        _cell(folder, cell_proc.ports, hostile=bad.port, security=""), folder / "gw.log"
-    )
+async def hostile(robots: int, seconds: float, folder: Path, size: int) -> dict[str, Any]:
+    cell_proc, bad = CellProcess(robots, folder), HostileProcess(size)
+    gw = GatewayProcess(cell_file(folder, cell_proc.ports, [bad.port]), folder / "gw.log")
     try:
-        client = await _client(gw, folder)
+        client = await open_client(gw, folder)
         watch = Watch(client, "abuse", [f"r{i}" for i in range(1, robots + 1)])
         await watch.start()
         await asyncio.sleep(2.0)  # every robot connected and polling
         base = await _phase(gw, watch, seconds)
         bad.big(True)
+        await asyncio.sleep(2.5)  # the gateway's reconnect backoff is at most 2.4 s
         attack = await _phase(gw, watch, seconds)
         bad.big(False)
         await watch.stop()
@@ -141,10 +114,10 @@ async def _oracle(robots: int, folder: Path, rounds: int) -> dict[str, Any]:
     cell_proc = CellProcess(robots, folder)
     raise_limit = "max_failed_logins = 100000\n" if _supports("max_failed_logins", "1000") else ""
     gw = GatewayProcess(
-        _cell(folder, cell_proc.ports, hostile=None, security=_security(folder, raise_limit)),
+        cell_file(folder, cell_proc.ports, security=_security(raise_limit)),
         folder / "gw-oracle.log",
     )
-    cert, key = _client_certificate(folder, "urn:pyopenshowvar:abuse-client")
+    cert, key = client_certificate(folder, CLIENT_URI)
     known, unknown = LoginTally(), LoginTally()
     try:
         for _ in range(rounds):
@@ -165,12 +138,9 @@ async def _oracle(robots: int, folder: Path, rounds: int) -> dict[str, Any]:
 async def logins(robots: int, seconds: float, folder: Path, rounds: int) -> dict[str, Any]:
     oracle = await _oracle(robots, folder, rounds)
     cell_proc = CellProcess(robots, folder)
-    gw = GatewayProcess(
-        _cell(folder, cell_proc.ports, hostile=None, security=_security(folder)),
-        folder / "gw.log",
-    )
+    gw = GatewayProcess(cell_file(folder, cell_proc.ports, security=_security()), folder / "gw.log")
     try:
-        client = await _client(gw, folder)
+        client = await open_client(gw, folder, USER, SECRET)
         watch = Watch(client, "abuse", [f"r{i}" for i in range(1, robots + 1)])
         await watch.start()
         await asyncio.sleep(2.0)
@@ -231,6 +201,9 @@ def main() -> None:
     ap.add_argument("--robots", type=int, default=3, help="healthy robots (10 Hz)")
     ap.add_argument("--seconds", type=float, default=8.0, help="length of each phase")
     ap.add_argument("--rounds", type=int, default=6, help="refusals timed per user kind")
+    ap.add_argument(
+        "--hostile-size", type=int, default=60_000, help="characters of each hostile reply"
+    )
     args = ap.parse_args()
     seconds = 2.0 if args.quick else args.seconds
     rounds = 2 if args.quick else args.rounds
@@ -239,7 +212,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         if args.only in (None, "hostile"):
-            r = asyncio.run(hostile(args.robots, seconds, folder))
+            r = asyncio.run(hostile(args.robots, seconds, folder, args.hostile_size))
             extra["hostile"] = r
             rows += _rows("hostile robot", r)
             rows.append(Row("hostile robot: 60 KB replies sent", r["hostile"]["big_replies"], ""))
@@ -253,7 +226,7 @@ def main() -> None:
                     "login flood: attempts",
                     f["attempts"],
                     "",
-                    note=f"denied {f['denied']}, closed {f['closed']}, accepted {f['accepted']}, "
+                    note=f"denied {f['denied']}, locked {f['locked']}, accepted {f['accepted']}, "
                     f"errors {f['errors']}",
                 )
             )

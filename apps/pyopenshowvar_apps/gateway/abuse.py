@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import functools
 import itertools
 import json
@@ -41,14 +42,19 @@ from pyopenshowvar.protocol import Mode, Request
 from pyopenshowvar.testing import FakeProxy, answer
 
 __all__ = [
+    "CLIENT_URI",
     "SWING_KRL",
     "CellProcess",
     "GatewayProcess",
     "HostileProcess",
     "LoginTally",
     "Watch",
+    "cell_file",
+    "client_certificate",
     "hostile_text",
     "login_flood",
+    "login_once",
+    "open_client",
     "percentile",
 ]
 
@@ -65,6 +71,7 @@ END
 """
 
 PYTHON = sys.executable
+CLIENT_URI = "urn:pyopenshowvar:abuse-client"
 
 
 def percentile(sorted_values: Sequence[float], q: float) -> float:
@@ -254,6 +261,45 @@ class GatewayProcess:
         return _stop(self.proc)
 
 
+def cell_file(
+    folder: Path,
+    healthy: Sequence[int],
+    hostile: Sequence[int] = (),
+    *,
+    security: str = "",
+) -> Path:
+    """A cell file ``abuse``: healthy robots r1.. at 10 Hz, hostile ones h1.. at 50 Hz, and
+    ``security`` (the text of a ``[security]`` table, or nothing: loopback, anonymous)."""
+    text = f'[cell]\nname = "abuse"\nendpoint = "opc.tcp://127.0.0.1:0"\n{security}'
+    for i, port in enumerate(healthy, 1):
+        text += f'[[robot]]\nname = "r{i}"\nhost = "127.0.0.1"\nport = {port}\n'
+    for i, port in enumerate(hostile, 1):
+        text += f'[[robot]]\nname = "h{i}"\nhost = "127.0.0.1"\nport = {port}\npoll_hz = 50\n'
+    path = folder / "cell.toml"
+    path.write_text(text)
+    return path
+
+
+async def open_client(gw: GatewayProcess, folder: Path, user: str = "", password: str = "") -> Any:
+    """A connected asyncua client: anonymous, or (security on) Basic256Sha256 Sign&Encrypt
+    with a certificate of its own and ``user``/``password``."""
+    from asyncua import Client, ua
+    from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
+
+    client = Client(gw.url, timeout=30)
+    if gw.fingerprint:
+        cert, key = client_certificate(folder, CLIENT_URI, "watcher")
+        client.application_uri = CLIENT_URI
+        await client.set_security(
+            SecurityPolicyBasic256Sha256, str(cert), str(key),
+            mode=ua.MessageSecurityMode.SignAndEncrypt,
+        )  # fmt: skip
+        client.set_user(user)
+        client.set_password(password)
+    await client.connect()
+    return client
+
+
 # --------------------------------------------------------------------------- logins
 
 
@@ -264,18 +310,19 @@ class LoginTally:
     attempts: int = 0
     #: the gateway answered BadUserAccessDenied (checked and refused)
     denied: int = 0
-    #: the gateway closed the connection before a session (the address is locked out)
-    closed: int = 0
+    #: refused at once, before a session (BadSecurityChecksFailed: the address is locked out)
+    locked: int = 0
     #: logged in: must stay 0 with a wrong password
     accepted: int = 0
     #: anything else (a timeout, an unexpected status): the abuser's own errors
     errors: int = 0
     notes: list[str] = field(default_factory=list)
-    #: seconds each refusal took, by kind ("denied", "closed")
+    #: seconds each attempt took, by kind ("denied", "locked", ...)
     times: dict[str, list[float]] = field(default_factory=dict)
 
 
-def _client_certificate(folder: Path, uri: str) -> tuple[Path, Path]:
+def client_certificate(folder: Path, uri: str, name: str = "abuser") -> tuple[Path, Path]:
+    """A client application certificate and key (self-signed) in ``folder``."""
     from asyncua.crypto import cert_gen
     from cryptography.hazmat.primitives import serialization
     from cryptography.x509.oid import ExtendedKeyUsageOID
@@ -285,7 +332,7 @@ def _client_certificate(folder: Path, uri: str) -> tuple[Path, Path]:
         key, "abuse client", {}, [cert_gen.x509.UniformResourceIdentifier(uri)],
         extended=[ExtendedKeyUsageOID.CLIENT_AUTH],
     )  # fmt: skip
-    cert_path, key_path = folder / "abuser-cert.der", folder / "abuser-key.pem"
+    cert_path, key_path = folder / f"{name}-cert.der", folder / f"{name}-key.pem"
     cert_path.write_bytes(cert.public_bytes(serialization.Encoding.DER))
     key_path.write_bytes(cert_gen.dump_private_key_as_pem(key))
     return cert_path, key_path
@@ -299,53 +346,45 @@ async def login_once(
     from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 
     client = Client(url, timeout=10)
-    client.application_uri = "urn:pyopenshowvar:abuse-client"
-    await client.set_security(
-        SecurityPolicyBasic256Sha256, str(cert), str(key),
-        mode=ua.MessageSecurityMode.SignAndEncrypt,
-    )  # fmt: skip
+    client.application_uri = CLIENT_URI
     client.set_user(user)
     client.set_password(password)
     tally.attempts += 1
     started = time.perf_counter()
     kind = "errors"
     try:
+        # set_security asks the server for its endpoints: a locked-out client fails here
+        await client.set_security(
+            SecurityPolicyBasic256Sha256, str(cert), str(key),
+            mode=ua.MessageSecurityMode.SignAndEncrypt,
+        )  # fmt: skip
         await client.connect()
         kind = "accepted"
         await client.disconnect()
     except ua.UaStatusCodeError as exc:
-        kind = "denied" if exc.code == ua.StatusCodes.BadUserAccessDenied else "errors"
+        kinds = {
+            ua.StatusCodes.BadUserAccessDenied: "denied",
+            ua.StatusCodes.BadSecurityChecksFailed: "locked",
+        }
+        kind = kinds.get(exc.code, "errors")
         if kind == "errors":
             tally.notes.append(f"{type(exc).__name__}: {exc}")
-    except (ConnectionError, asyncio.IncompleteReadError, ua.UaError) as exc:
-        kind = "closed"
-        del exc
-    except (TimeoutError, OSError) as exc:
+    except (TimeoutError, OSError, ua.UaError) as exc:
         tally.notes.append(f"{type(exc).__name__}: {exc}")
     finally:
-        with _quiet():
+        with contextlib.suppress(Exception):
             await client.close_secure_channel()
-        with _quiet():
+        with contextlib.suppress(Exception):
             client.disconnect_socket()
     setattr(tally, kind, getattr(tally, kind) + 1)
     tally.times.setdefault(kind, []).append(time.perf_counter() - started)
-
-
-class _quiet:
-    """``contextlib.suppress(Exception)`` that also keeps asyncua's own cleanup errors quiet."""
-
-    def __enter__(self) -> None:
-        return None
-
-    def __exit__(self, *exc: object) -> bool:
-        return True
 
 
 async def login_flood(
     url: str, users: Sequence[str], seconds: float, folder: Path, *, max_attempts: int = 10_000
 ) -> LoginTally:
     """Wrong-password logins for ``seconds``, cycling through ``users``, one at a time."""
-    cert, key = _client_certificate(folder, "urn:pyopenshowvar:abuse-client")
+    cert, key = client_certificate(folder, CLIENT_URI)
     tally = LoginTally()
     deadline = time.monotonic() + seconds
     while time.monotonic() < deadline and tally.attempts < max_attempts:
@@ -439,10 +478,10 @@ class Watch:
     async def stop(self) -> None:
         if self._task is not None:
             self._task.cancel()
-            with _quiet():
+            with contextlib.suppress(asyncio.CancelledError):
                 await self._task
         if self._sub is not None:
-            with _quiet():
+            with contextlib.suppress(Exception):
                 await self._sub.delete()
 
     def summary(self) -> dict[str, float]:

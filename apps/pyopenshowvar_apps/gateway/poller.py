@@ -123,7 +123,7 @@ class RobotPoller:
             except (KvpError, OSError, TimeoutError) as exc:
                 # jitter keeps 50 robots behind one switch from reconnecting in lockstep
                 delay = backoff * (0.8 + 0.4 * random.random())
-                if self.connected or not self.last_error:
+                if self.connected or _reason(exc) != self.last_error:  # news only
                     log.warning(
                         "robot %s (%s:%d): %s; reconnecting in %.1f s",
                         self.cfg.name, self.cfg.host, self.cfg.port, _reason(exc), delay,

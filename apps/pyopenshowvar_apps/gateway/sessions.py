@@ -5,8 +5,9 @@ event loop: a PBKDF2 check of 200 000 iterations there stalls every robot's poll
 of a second and more, once per login attempt. So the gateway's connections are asyncua's own
 with two hooks:
 
-* a connection from a client address that is locked out (too many failed logins) is closed
-  as soon as it is accepted, before any message costs a cryptographic operation;
+* a connection from a client address that is locked out (too many failed logins) gets an
+  OPC UA Error message (BadSecurityChecksFailed) and is closed as soon as it is accepted,
+  before any message costs a cryptographic operation;
 * before asyncua handles an ActivateSession request, its user token is decrypted and the
   login decided by :meth:`LoginGuard.login <.security.LoginGuard.login>` (off the event loop,
   with the channel's client certificate); asyncua's synchronous call of the user manager then
@@ -26,7 +27,7 @@ from asyncua import Server, ua
 from asyncua.server import server as _server_module
 from asyncua.server.binary_server_asyncio import BinaryServer, OPCUAProtocol
 from asyncua.server.uaprocessor import UaProcessor
-from asyncua.ua.ua_binary import struct_from_binary
+from asyncua.ua.ua_binary import struct_from_binary, uatcp_to_binary
 
 from .security import VERDICT, LoginGuard, Verdict, _digest
 
@@ -35,6 +36,8 @@ __all__ = ["GatewayServer"]
 log = logging.getLogger(__name__)
 
 _ACTIVATE = ua.NodeId(ua.ObjectIds.ActivateSessionRequest_Encoding_DefaultBinary)
+#: what a locked-out client is told before its connection is closed
+_LOCKED = ua.StatusCodes.BadSecurityChecksFailed
 
 
 def _address(peer: Any) -> str:
@@ -78,12 +81,13 @@ class _Processor(UaProcessor):
 
 class _Protocol(OPCUAProtocol):
     guard: LoginGuard
+    _refused: Any = None
 
     def connection_made(self, transport: Any) -> None:
         address = _address(transport.get_extra_info("peername"))
         if self.guard.locked(address):
-            log.warning("closed a connection from %s: too many failed logins", address)
-            transport.close()
+            log.warning("refused a connection from %s: too many failed logins", address)
+            self._refused = transport  # answered at its first message (data_received)
             return
         super().connection_made(transport)
         if self.processor is not None:  # asyncua's own, replaced before it saw a message
@@ -91,6 +95,17 @@ class _Protocol(OPCUAProtocol):
             processor.guard = self.guard
             processor.set_policies(self.policies)
             self.processor = processor
+
+    def data_received(self, data: bytes) -> None:
+        if self._refused is None:
+            super().data_received(data)
+            return
+        # an OPC UA Error message in answer to the client's Hello (sent before it, a client
+        # may not be listening yet): it fails at once and says why; then the socket closes
+        transport, self._refused = self._refused, None
+        error = ua.ErrorMessage(ua.StatusCode(_LOCKED), "too many failed logins; try later")
+        transport.write(uatcp_to_binary(ua.MessageType.Error, error))
+        transport.close()
 
 
 class _BinaryServer(BinaryServer):
