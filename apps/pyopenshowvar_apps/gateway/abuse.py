@@ -54,6 +54,7 @@ __all__ = [
     "hostile_text",
     "login_flood",
     "login_once",
+    "measure",
     "open_client",
     "percentile",
 ]
@@ -498,6 +499,21 @@ class Watch:
             "read_errors": self.read_errors,
             "bad": self.bad,
         }
+
+
+async def measure(gw: GatewayProcess, watch: Watch, seconds: float) -> dict[str, Any]:
+    """One phase: the :meth:`Watch.summary` of ``seconds``, the gateway's CPU (% of one core),
+    its peak resident memory and how far that peak rose above the memory at the start."""
+    gw.reset_peak()
+    before = gw.rss_mb()
+    watch.mark()
+    c0, t0 = gw.cpu_seconds(), time.monotonic()
+    await asyncio.sleep(seconds)
+    result: dict[str, Any] = watch.summary()
+    result["cpu_pct"] = 100 * (gw.cpu_seconds() - c0) / (time.monotonic() - t0)
+    result["peak_rss_mb"] = gw.peak_rss_mb()
+    result["growth_mb"] = result["peak_rss_mb"] - before
+    return result
 
 
 # --------------------------------------------------------------------------- command line

@@ -3,10 +3,10 @@
 Passwords are never stored: the cell file holds ``pbkdf2-sha256$ITERATIONS$SALT$HASH``
 (``kvp gateway --hash-password`` makes one). :class:`LoginGuard` decides every login: off the
 event loop, at the same cost for every user name, with a limit of failed logins per client
-address and, where configured, only from trusted client certificates. The server certificate is generated once (RSA
-2048, self-signed, the application URI in its subjectAltName as OPC UA requires) and kept in
-the cell's PKI folder, the private key readable by its owner only; clients pin its SHA-256
-fingerprint, which the gateway logs at start.
+address and, where configured, only from trusted client certificates. The server certificate
+is generated once (RSA 2048, self-signed, the application URI in its subjectAltName as OPC UA
+requires) and kept in the cell's PKI folder, the private key readable by its owner only;
+clients pin its SHA-256 fingerprint, which the gateway logs at start.
 """
 
 from __future__ import annotations
@@ -164,7 +164,10 @@ class LoginGuard:
         self.trusts = trusts
         self.clock = clock
         self.cost = max((_iterations(h) for h in self._users.values()), default=_ITERATIONS)
-        self._dummy = hash_password(secrets.token_urlsafe(16), iterations=self.cost)
+        # a hash of no password at all (a random digest): checking against it costs what
+        # checking a real one does, and nothing matches it
+        random_hash = (_b64(secrets.token_bytes(16)), _b64(secrets.token_bytes(32)))
+        self._dummy = "$".join([_SCHEME, str(self.cost), *random_hash])
         self._failures: dict[str, deque[float]] = {}
         self._pending = 0
         self._executor = ThreadPoolExecutor(1, thread_name_prefix="gateway-login")

@@ -139,12 +139,12 @@ class GatewayServer(Server):
                 self.guard = guard
 
         # asyncua's Server.start() builds its BinaryServer by this module-level name
-        original = _server_module.BinaryServer
-        _server_module.BinaryServer = Bound  # type: ignore[misc]
+        original = _server_module.BinaryServer  # type: ignore[attr-defined]
+        setattr(_server_module, "BinaryServer", Bound)  # noqa: B010 - a module attribute
         try:
             await super().start()
         finally:
-            _server_module.BinaryServer = original  # type: ignore[misc]
+            setattr(_server_module, "BinaryServer", original)  # noqa: B010
         if not isinstance(self.bserver, _BinaryServer):
             await super().stop()
             raise RuntimeError("asyncua did not take the gateway's connections: not serving")
