@@ -5,10 +5,10 @@
     .venv/bin/python bench/gateway_abuse.py --quick         # 2 s phases (smoke test)
 
 Everything runs as its own process: healthy robots (real emulators running a program that
-never stops moving, ``pyopenshowvar_apps.gateway.abuse.CellProcess``), the real ``kvp gateway``
-command, the attackers, and this script's OPC UA client, which subscribes to the healthy
-robots' axes and reads a node every 20 ms. Each scenario measures a baseline phase and then
-an attack phase on the same gateway:
+never stops moving), the real ``kvp gateway`` command, the attackers, and this script's OPC UA
+client, which subscribes to the healthy robots' axes and reads a node every 20 ms
+(``pyopenshowvar_apps.gateway.testbed``; the attackers are in ``.abuse``). Each scenario
+measures a baseline phase and then an attack phase on the same gateway:
 
 * **hostile** — one more robot in the cell is a fake one polled at 50 Hz; in the attack phase
   it answers every read with a different ~60 KB nested STRUC;
@@ -30,28 +30,26 @@ import json
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _common import Row, base_parser, machine_info, print_rows, write_json
-from pyopenshowvar_apps.gateway.abuse import (
+from pyopenshowvar_apps.gateway.abuse import HostileProcess, LoginTally, login_once
+from pyopenshowvar_apps.gateway.cell import CellError, parse_cell
+from pyopenshowvar_apps.gateway.security import hash_password
+from pyopenshowvar_apps.gateway.testbed import (
     CLIENT_URI,
     CellProcess,
     GatewayProcess,
-    HostileProcess,
-    LoginTally,
     Watch,
     cell_file,
     client_certificate,
-    login_once,
+    measure,
     open_client,
     percentile,
 )
-from pyopenshowvar_apps.gateway.cell import CellError, parse_cell
-from pyopenshowvar_apps.gateway.security import hash_password
 
 SECRET = "correct horse battery"
 USER = "scada"
@@ -76,17 +74,6 @@ def _supports(key: str, value: str) -> bool:
     return True
 
 
-async def _phase(gw: GatewayProcess, watch: Watch, seconds: float) -> dict[str, Any]:
-    gw.reset_peak()
-    watch.mark()
-    c0, t0 = gw.cpu_seconds(), time.monotonic()
-    await asyncio.sleep(seconds)
-    result: dict[str, Any] = watch.summary()
-    result["cpu_pct"] = 100 * (gw.cpu_seconds() - c0) / (time.monotonic() - t0)
-    result["peak_rss_mb"] = gw.peak_rss_mb()
-    return result
-
-
 async def hostile(robots: int, seconds: float, folder: Path, size: int) -> dict[str, Any]:
     cell_proc, bad = CellProcess(robots, folder), HostileProcess(size)
     gw = GatewayProcess(cell_file(folder, cell_proc.ports, [bad.port]), folder / "gw.log")
@@ -95,10 +82,10 @@ async def hostile(robots: int, seconds: float, folder: Path, size: int) -> dict[
         watch = Watch(client, "abuse", [f"r{i}" for i in range(1, robots + 1)])
         await watch.start()
         await asyncio.sleep(2.0)  # every robot connected and polling
-        base = await _phase(gw, watch, seconds)
+        base = await measure(gw, watch, seconds)
         bad.big(True)
         await asyncio.sleep(2.5)  # the gateway's reconnect backoff is at most 2.4 s
-        attack = await _phase(gw, watch, seconds)
+        attack = await measure(gw, watch, seconds)
         bad.big(False)
         await watch.stop()
         await client.disconnect()
@@ -144,14 +131,14 @@ async def logins(robots: int, seconds: float, folder: Path, rounds: int) -> dict
         watch = Watch(client, "abuse", [f"r{i}" for i in range(1, robots + 1)])
         await watch.start()
         await asyncio.sleep(2.0)
-        base = await _phase(gw, watch, seconds)
+        base = await measure(gw, watch, seconds)
         flood = await asyncio.create_subprocess_exec(
             sys.executable, "-m", "pyopenshowvar_apps.gateway.abuse", "logins", gw.url,
             "--user", USER, "--user", "nobody", "--seconds", str(seconds),
             "--folder", str(folder),
             stdout=subprocess.PIPE,
         )  # fmt: skip
-        attack = await _phase(gw, watch, seconds)
+        attack = await measure(gw, watch, seconds)
         out, _ = await asyncio.wait_for(flood.communicate(), 60)
         tally = json.loads(out.decode().strip().splitlines()[-1])
         tally.pop("times", None)
@@ -215,7 +202,8 @@ def main() -> None:
             r = asyncio.run(hostile(args.robots, seconds, folder, args.hostile_size))
             extra["hostile"] = r
             rows += _rows("hostile robot", r)
-            rows.append(Row("hostile robot: 60 KB replies sent", r["hostile"]["big_replies"], ""))
+            sent = r["hostile"]["big_replies"]
+            rows.append(Row(f"hostile robot: {args.hostile_size}-character replies", sent, ""))
         if args.only in (None, "logins"):
             r = asyncio.run(logins(args.robots, seconds, folder, rounds))
             extra["logins"] = r

@@ -4,7 +4,8 @@ Every process is its own: healthy robots (real emulators whose program never sto
 the gateway, the attackers (a fake robot answering ~60 KB STRUCs, one answering ~3 KB ones
 that are under the size cap but costly to parse, a process logging in with a wrong password
 as fast as it is answered) and this test's OPC UA client, which subscribes to the healthy
-robots' axes and reads a node every 20 ms (:mod:`pyopenshowvar_apps.gateway.abuse`).
+robots' axes and reads a node every 20 ms (``pyopenshowvar_apps.gateway.testbed`` and
+``.abuse``).
 
 Each test measures a baseline phase and then an attack phase on the same gateway, and
 compares: the healthy robots' update gaps and the reads may not get much worse than the
@@ -26,16 +27,16 @@ from typing import Any
 import pytest
 
 pytest.importorskip("asyncua")
-from pyopenshowvar_apps.gateway.abuse import (
+from pyopenshowvar_apps.gateway.abuse import HostileProcess
+from pyopenshowvar_apps.gateway.security import hash_password
+from pyopenshowvar_apps.gateway.testbed import (
     CellProcess,
     GatewayProcess,
-    HostileProcess,
     Watch,
     cell_file,
     measure,
     open_client,
 )
-from pyopenshowvar_apps.gateway.security import hash_password
 
 pytestmark = [
     pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RSS from /proc"),
