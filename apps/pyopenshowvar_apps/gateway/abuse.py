@@ -9,8 +9,8 @@ of :mod:`.testbed` (healthy robots, the gateway, a watching client):
   line on its stdin), and closes every connection while ``off`` (the gateway then sees a robot
   that is down);
 * ``python -m pyopenshowvar_apps.gateway.abuse logins`` (:func:`login_flood`) — logins with a
-  wrong password, one after the other, as fast as the gateway answers; prints its
-  :class:`LoginTally` (JSON).
+  wrong password, one after the other, as fast as the gateway answers (at most 10 a second);
+  prints ``flooding`` once it starts and its :class:`LoginTally` (JSON) at the end.
 
 Nothing here asserts: the suite and the benchmark decide what is acceptable.
 """
@@ -25,7 +25,7 @@ import json
 import subprocess
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -192,15 +192,29 @@ async def login_once(
 
 
 async def login_flood(
-    url: str, users: Sequence[str], seconds: float, folder: Path, *, max_attempts: int = 10_000
+    url: str,
+    users: Sequence[str],
+    seconds: float,
+    folder: Path,
+    *,
+    interval: float = 0.1,
+    max_attempts: int = 10_000,
+    on_start: Callable[[], None] | None = None,
 ) -> LoginTally:
-    """Wrong-password logins for ``seconds``, cycling through ``users``, one at a time."""
+    """Wrong-password logins for ``seconds``, cycling through ``users``, one at a time, a new
+    one at most every ``interval`` seconds (the default, 10 a second, is more than twice the
+    rate of a flood that stalled the gateway before the login checks left the event loop; a
+    faster one on the same machine mostly measures the attacker's own CPU)."""
     cert, key = client_certificate(folder, CLIENT_URI)
     tally = LoginTally()
+    if on_start is not None:  # ready: imports done, the key made
+        on_start()
     deadline = time.monotonic() + seconds
     while time.monotonic() < deadline and tally.attempts < max_attempts:
+        started = time.monotonic()
         user = users[tally.attempts % len(users)]
         await login_once(url, cert, key, user, "not the password", tally)
+        await asyncio.sleep(max(0.0, started + interval - time.monotonic()))
     return tally
 
 
@@ -217,11 +231,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     logins.add_argument("--user", action="append", required=True)
     logins.add_argument("--seconds", type=float, default=5.0)
     logins.add_argument("--folder", type=Path, required=True)
+    logins.add_argument("--interval", type=float, default=0.1, help="seconds between attempts")
     args = ap.parse_args(argv)
     if args.what == "hostile":
         asyncio.run(serve_hostile(args.size))
         return 0
-    tally = asyncio.run(login_flood(args.url, args.user, args.seconds, args.folder))
+    flood = login_flood(
+        args.url, args.user, args.seconds, args.folder, interval=args.interval,
+        on_start=lambda: print("flooding", flush=True),
+    )  # fmt: skip
+    tally = asyncio.run(flood)
     print(json.dumps(asdict(tally)), flush=True)
     return 0
 
