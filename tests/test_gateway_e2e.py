@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import time
 from collections.abc import AsyncIterator
 from typing import Any
@@ -200,7 +201,10 @@ async def test_subscribed_client_sees_three_robots_move(cell: Cell) -> None:
                 await kvp.write("MYAXIS", "{A1 0.0}")
 
 
-async def test_dropped_robot_goes_bad_and_comes_back_good(cell: Cell) -> None:
+async def test_dropped_robot_goes_bad_and_comes_back_good(
+    cell: Cell, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.INFO, logger="pyopenshowvar_apps.gateway")
     async with ua_client(cell.gw) as (client, ours, _):
         a2 = client.get_node(node_id(ours, "MotionDevices.r3.Axes.A2.ParameterSet.ActualPosition"))
         other = client.get_node(
@@ -228,6 +232,11 @@ async def test_dropped_robot_goes_bad_and_comes_back_good(cell: Cell) -> None:
         assert await connected.read_value() is True
         await wait_for(lambda: statuses.seen(ua.StatusCodes.Good, after_bad=True))
         await sub.delete()
+        # the log says what the poller does: it reconnects (the client's advice to call
+        # connect() by hand is for a client without a poller)
+        lost = [r.getMessage() for r in caplog.records if "robot r3 (" in r.getMessage()]
+        assert lost and all("reconnecting in" in m for m in lost), lost
+        assert not any("auto_reconnect" in r.getMessage() for r in caplog.records)
         assert statuses.codes[0] == ua.StatusCodes.Good  # the value when it subscribed
         assert ua.StatusCodes.BadNoCommunication in statuses.codes
         assert all(stamp is not None for stamp in statuses.stamps)
@@ -329,3 +338,75 @@ async def test_a_snapshot_group_is_read_as_one_struc_and_fanned_out(cell: Cell) 
         async with Client("127.0.0.1", cell.emus["r4"].port) as kvp:
             await kvp.write("GW_SNAP.OV", "33")
         await wait_for(lambda: _equals(override, 33.0))
+
+
+async def test_near_miss_names_are_not_the_writable_variable(cell: Cell) -> None:
+    """Only a name the cell file lists, as a whole: case aside, nothing else is the same."""
+    async with ua_client(cell.gw) as (client, ours, _):
+        ctrl = client.get_node(node_id(ours, "Controllers.r1"))
+        method = node_id(ours, "Controllers.r1.WriteVariable")
+        async with Client("127.0.0.1", cell.emus["r1"].port) as kvp:
+            before = await kvp.read("$OV_PRO")
+            for name in (
+                "$OV _PRO",
+                " $OV_PRO",
+                "$OV_PRO ",
+                "$OV_PRO\n",
+                "$OV_PRO[]",
+                "$OV_PRO[1]",
+                "$OV_PROX",
+                "$OV_PR",
+                "OV_PRO",
+                "$OV_PRO.A1",
+                "$OV_PRO;",
+                "MYAXIS.A1",
+                "",
+            ):
+                with pytest.raises(ua.UaStatusCodeError) as refused:
+                    await ctrl.call_method(method, name, "37")
+                assert refused.value.code == ua.StatusCodes.BadUserAccessDenied, name
+            assert await kvp.read("$OV_PRO") == before  # nothing was sent
+            # KRL is case-insensitive: the listed variable, written under its listed name
+            assert await ctrl.call_method(method, "$ov_Pro", "37") == ["37", ""]
+            assert await kvp.read("$OV_PRO") == "37"
+            assert await ctrl.call_method(method, "$OV_PRO", before) == [before, ""]
+
+
+async def test_nodes_are_named_after_themselves_and_the_server_after_the_gateway(
+    cell: Cell,
+) -> None:
+    async with ua_client(cell.gw) as (client, ours, _):
+        for path, name in (
+            ("MotionDevices.r1", "r1"),
+            ("MotionDevices.r2", "r2"),  # a copy of r1's nodes (gateway/clone.py)
+            ("Controllers.r3", "r3"),
+            ("SafetyStates.r2", "r2"),
+            ("MotionDevices.r2.Axes.A4", "A4"),
+            ("MotionDevices.r1.PowerTrains.PowerTrain2", "PowerTrain2"),
+            ("MotionDevices.r1.PowerTrains.PowerTrain2.Motor2", "Motor2"),
+            ("Controllers.r1.TaskControls.RobotInterpreter", "RobotInterpreter"),
+            ("Controllers.r1.Software.KSS", "KSS"),
+            ("SafetyStates.r1.EmergencyStopFunctions.EmergencyStop", "EmergencyStop"),
+            ("MotionDevices.r1.PowerTrains.PowerTrain1.Motor1.ParameterSet.ActualTorque",
+             "ActualTorque"),
+            ("MotionDevices.r1.Axes.A1.ParameterSet.ActualPosition", "ActualPosition"),
+        ):  # fmt: skip
+            shown = await client.get_node(node_id(ours, path)).read_display_name()
+            assert shown.Text == name, path
+        root = client.get_node(ua.NodeId("testcell", ours))
+        assert (await root.read_display_name()).Text == "testcell"
+        build = await client.get_node(
+            ua.NodeId(ua.ObjectIds.Server_ServerStatus_BuildInfo)
+        ).read_value()
+        assert build.ProductName == "pyopenshowvar kvp gateway"
+        assert build.ManufacturerName == "pyopenshowvar"
+        assert build.ProductUri == GATEWAY_URI
+        assert "FreeOpcUa" not in f"{build}"
+        temp = client.get_node(
+            node_id(
+                ours,
+                "MotionDevices.r1.PowerTrains.PowerTrain1.Motor1.ParameterSet.MotorTemperature",
+            )
+        )
+        await wait_for(lambda: _is_good(temp))
+        assert await temp.read_value() == 26.85  # 300 K, not 26.850000000000023

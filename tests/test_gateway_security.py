@@ -11,6 +11,7 @@ import asyncio
 import re
 import signal
 import sys
+from collections.abc import Awaitable
 from pathlib import Path
 
 import pytest
@@ -143,3 +144,73 @@ async def test_secured_gateway_refuses_anonymous_and_unencrypted_clients(tmp_pat
             if proc.returncode is None:
                 proc.send_signal(signal.SIGTERM)
             assert await asyncio.wait_for(proc.wait(), 30) == 0
+
+
+def _blank_create_session_certificate(client: UaClient) -> None:
+    """A client that leaves its certificate out of CreateSession (the channel still has it):
+    asyncua's own trust check looks only at that copy."""
+    original = client.uaclient.create_session
+
+    async def create_session(params: ua.CreateSessionParameters) -> object:
+        params.ClientCertificate = None
+        return await original(params)
+
+    client.uaclient.create_session = create_session  # type: ignore[method-assign]
+
+
+async def _refused(make: Awaitable[UaClient], tamper: bool = False) -> bool:
+    """Whether a login is refused (setting the client up already asks for the endpoints)."""
+    try:
+        client = await make
+        if tamper:
+            _blank_create_session_certificate(client)
+        await client.connect()
+    except (ua.UaError, OSError, TimeoutError, asyncio.IncompleteReadError):
+        return True
+    await client.disconnect()
+    return False
+
+
+@pytest.mark.timeout(120)
+async def test_logins_checked_on_the_channel_certificate_and_limited_per_address(
+    tmp_path: Path,
+) -> None:
+    from pyopenshowvar_apps.gateway.cell import load_cell
+    from pyopenshowvar_apps.gateway.server import Gateway
+
+    async with Emulator(
+        EmulatorConfig(port=0, discovery=False, idle_timeout=0, plant="ideal")
+    ) as emu:
+        secret = "correct horse battery"
+        trusted = tmp_path / "trusted"
+        trusted.mkdir()
+        cert, key = _client_certificate(tmp_path)
+        (trusted / cert.name).write_bytes(cert.read_bytes())
+        stranger_cert, stranger_key = _client_certificate(tmp_path, "stranger")
+        cell = tmp_path / "cell.toml"
+        digest = hash_password(secret, iterations=10_000)
+        cell.write_text(
+            '[cell]\nname = "secure"\nendpoint = "opc.tcp://127.0.0.1:0"\n'
+            '[security]\ntrusted_clients = "trusted"\nmax_failed_logins = 2\n'
+            f'lockout_seconds = 2\nusers = [{{ name = "scada", password_hash = "{digest}" }}]\n'
+            f'[[robot]]\nname = "r1"\nhost = "127.0.0.1"\nport = {emu.port}\n'
+        )
+        async with Gateway(load_cell(cell)) as gw:
+            # 1. an untrusted certificate, the right password, and no certificate in
+            # CreateSession: refused (the channel's certificate is what counts)
+            sneaky = _secure_client(gw.url, stranger_cert, stranger_key, "scada", secret)
+            assert await _refused(sneaky, tamper=True)
+            # the trusted client gets in the same way, so it was the certificate
+            honest = _secure_client(gw.url, cert, key, "scada", secret)
+            assert not await _refused(honest, tamper=True)
+            # 2. two failed logins lock 127.0.0.1 out: even the right password is refused,
+            # its connection closed before a session
+            for _ in range(2):  # (the success above cleared the certificate's failure)
+                assert not gw.guard.locked("127.0.0.1")
+                assert await _refused(_secure_client(gw.url, cert, key, "scada", "x"))
+            assert gw.guard.locked("127.0.0.1")
+            assert await _refused(_secure_client(gw.url, cert, key, "scada", secret))
+            # 3. once the failures are lockout_seconds old, the address may log in again
+            await asyncio.sleep(2.1)
+            assert not gw.guard.locked("127.0.0.1")
+            assert not await _refused(_secure_client(gw.url, cert, key, "scada", secret))

@@ -11,12 +11,7 @@ from hypothesis import strategies as st
 from pyopenshowvar_apps.gateway.cell import CellError, load_cell, parse_cell
 from pyopenshowvar_apps.gateway.mapping import poll_values, task_state
 from pyopenshowvar_apps.gateway.poller import _next_slot
-from pyopenshowvar_apps.gateway.security import (
-    GatewayUserManager,
-    check_hash_format,
-    hash_password,
-    verify_password,
-)
+from pyopenshowvar_apps.gateway.security import check_hash_format, hash_password, verify_password
 
 from pyopenshowvar import KrlEnum, parse_value
 
@@ -82,8 +77,8 @@ def test_a_cell_file_on_disk(tmp_path: Path) -> None:
     c = load_cell(path)
     assert c.name == "line-1" and c.security.pki_dir == tmp_path / "pki"
     r = c.robots[0]
-    assert r.exposed == ("$OV_JOG", "$OV_PRO") and r.is_writable("$ov_pro")
-    assert not r.is_writable("$OV_JOG")
+    assert r.exposed == ("$OV_JOG", "$OV_PRO") and r.writable_name("$ov_pro") == "$OV_PRO"
+    assert r.writable_name("$OV_JOG") is None
     assert r.snapshots[0].members == {"$AXIS_ACT": "AX"}
     path.write_text("[cell\n")
     with pytest.raises(CellError, match="not valid TOML"):
@@ -97,22 +92,6 @@ def test_password_hashes_verify_only_their_password(password: str) -> None:
     assert check_hash_format(stored) is None
     assert verify_password(password, stored)
     assert not verify_password(password + "x", stored)
-
-
-def test_user_manager_knows_anonymous_only_when_told() -> None:
-    users = parse_cell(
-        cell(
-            security={
-                "users": [{"name": "op", "password_hash": hash_password("pw", iterations=10_000)}]
-            }
-        )
-    ).security.users
-    secure = GatewayUserManager(users, anonymous=False)
-    assert secure.get_user(None) is None
-    assert secure.get_user(None, "op", "bad") is None
-    assert secure.get_user(None, "nobody", "pw") is None
-    assert secure.get_user(None, "op", "pw").name == "op"
-    assert GatewayUserManager((), anonymous=True).get_user(None).name == "anonymous"
 
 
 def test_poll_values_map_krc_variables_onto_the_robotics_model() -> None:
@@ -135,7 +114,7 @@ def test_poll_values_map_krc_variables_onto_the_robotics_model() -> None:
     assert out["position"] == [1.0, -90.0, 90.0, 0.0, 0.5, 0.0]
     assert out["speed"][0] == pytest.approx(180.0) and out["speed"][5] == pytest.approx(-36.0)
     assert out["torque"][1] == -24.78
-    assert out["temperature"][0] == pytest.approx(26.85)
+    assert out["temperature"][0] == 26.85  # rounded: not 26.850000000000023
     assert (out["override"], out["in_control"], out["mode"]) == (75.0, True, 4)
     assert out["estop"] is True  # $ALARM_STOP is active low
     assert out["opsafe_fn_active"] and out["pstop"]  # guard open in #EX
@@ -219,3 +198,88 @@ def test_poll_slots_are_on_the_grid_and_one_period_apart(
     assert now < slot <= now + period * (1 + 1e-6)
     assert (slot / period - phase) == pytest.approx(round(slot / period - phase), abs=1e-6)
     assert _next_slot(slot, period, phase) - slot == pytest.approx(period, rel=1e-6)
+
+
+def test_writable_names_match_whole_and_case_insensitively() -> None:
+    r = parse_cell(
+        cell(
+            robot=[
+                {
+                    **ROBOT,
+                    "writable": ["$OV_PRO", "OUTPUT_VARS[3]", "MYAXIS.A1", "$TOOL_DATA[1, 2]"],
+                    "allow_motion_writes": True,
+                }
+            ]
+        )
+    ).robots[0]
+    for name, listed in {
+        "$OV_PRO": "$OV_PRO",
+        "$ov_pro": "$OV_PRO",
+        "$Ov_PrO": "$OV_PRO",
+        "OUTPUT_VARS[3]": "OUTPUT_VARS[3]",
+        "output_vars[ 3]": "OUTPUT_VARS[3]",
+        "OUTPUT_VARS[3 ]": "OUTPUT_VARS[3]",
+        "myaxis.a1": "MYAXIS.A1",
+        "$TOOL_DATA[1,2]": "$TOOL_DATA[1, 2]",
+        "$tool_data[ 1 , 2 ]": "$TOOL_DATA[1, 2]",
+    }.items():
+        assert r.writable_name(name) == listed, name
+    for near in (
+        "$OV _PRO",  # a blank inside the name
+        " $OV_PRO",
+        "$OV_PRO ",
+        "$OV_PRO\t",
+        "$OV_PRO\n",
+        "$OV_PRO\x00",
+        "$OV\u00a0PRO",
+        "$OV_PRO[]",  # array brackets
+        "$OV_PRO[1]",
+        "$OV_PROX",  # trailing characters
+        "$OV_PRO.A1",
+        "$OV_PRO;",
+        "$OV_PR",
+        "OV_PRO",
+        "$$OV_PRO",
+        "OUTPUT_VARS[4]",
+        "OUTPUT_VARS[03]",
+        "OUTPUT_VARS",
+        "OUTPUT_VARS[]",
+        "OUTPUT_VARS [3]",
+        "OUTPUT_VARS[3][3]",
+        "MYAXIS",
+        "MYAXIS.A2",
+        "MYAXIS .A1",
+        "MYAXIS. A1",
+        "$TOOL_DATA[1]",
+        "$TOOL_DATA[12]",
+        "",
+    ):
+        assert r.writable_name(near) is None, repr(near)
+
+
+@pytest.mark.parametrize(
+    ("security", "message"),
+    [
+        ({"max_failed_logins": 0}, "max_failed_logins must be an integer in 1..1000000"),
+        ({"max_failed_logins": 1_000_001}, "max_failed_logins"),
+        ({"max_failed_logins": 2.0}, "max_failed_logins"),
+        ({"max_failed_logins": True}, "max_failed_logins"),
+        ({"lockout_seconds": 0.5}, "lockout_seconds must be within 1..86400"),
+        ({"lockout_seconds": 86401}, "lockout_seconds"),
+        ({"lockout_seconds": "60"}, "lockout_seconds"),
+    ],
+)
+def test_login_limits_are_checked(security: dict[str, object], message: str) -> None:
+    users = [{"name": "op", "password_hash": hash_password("pw", iterations=10_000)}]
+    with pytest.raises(CellError, match=message):
+        parse_cell(cell(security={"users": users, **security}))
+
+
+def test_login_limits_default_and_bounds() -> None:
+    users = [{"name": "op", "password_hash": hash_password("pw", iterations=10_000)}]
+    sec = parse_cell(cell(security={"users": users})).security
+    assert (sec.max_failed_logins, sec.lockout_seconds) == (5, 60.0)
+    low = {"users": users, "max_failed_logins": 1, "lockout_seconds": 1}
+    high = {"users": users, "max_failed_logins": 1_000_000, "lockout_seconds": 86400}
+    assert parse_cell(cell(security=low)).security.max_failed_logins == 1
+    assert parse_cell(cell(security=high)).security.lockout_seconds == 86400.0

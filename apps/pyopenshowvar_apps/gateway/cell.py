@@ -33,6 +33,8 @@ from urllib.parse import urlsplit
 
 from pyopenshowvar_apps.names import is_motion_variable
 
+from .budget import MAX_VALUE_CHARS
+
 __all__ = [
     "CellConfig",
     "CellError",
@@ -51,6 +53,7 @@ _NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,31}")
 _KRL_NAME = re.compile(
     r"\$?[A-Za-z_][A-Za-z0-9_]*(\[[0-9, ]*\])?(\.[A-Za-z_][A-Za-z0-9_]*(\[[0-9, ]*\])?)*"
 )
+_INDEX = re.compile(r"\[[0-9, ]*\]")
 MAX_POLL_HZ = 50.0
 MAX_ROBOTS = 200
 
@@ -76,6 +79,10 @@ class SecurityConfig:
     #: Client certificates to trust (a folder of DER/PEM files); None accepts any client
     #: certificate and relies on the user/password check.
     trusted_clients: Path | None = None
+    #: A client address with this many failed logins within ``lockout_seconds`` is refused
+    #: (its logins unchecked, its new connections closed) until the oldest failure ages out.
+    max_failed_logins: int = 5
+    lockout_seconds: float = 60.0
 
 
 @dataclass(frozen=True)
@@ -107,6 +114,8 @@ class RobotConfig:
     #: them from the KR 6 R900 sixx model of pyopenshowvar.kinematics.
     max_axis_speed: tuple[float, ...] | None = None
     snapshots: tuple[SnapshotGroup, ...] = ()
+    #: A reply longer than this is not parsed: the robot is misbehaving (gateway/budget.py).
+    max_value_chars: int = MAX_VALUE_CHARS
 
     @property
     def exposed(self) -> tuple[str, ...]:
@@ -114,8 +123,18 @@ class RobotConfig:
         seen = {canonical(v) for v in self.variables}
         return self.variables + tuple(w for w in self.writable if canonical(w) not in seen)
 
-    def is_writable(self, name: str) -> bool:
-        return canonical(name) in {canonical(w) for w in self.writable}
+    def writable_name(self, name: str) -> str | None:
+        """The cell file's spelling of ``name`` when it is listed in ``writable``, else None.
+
+        ``name`` must be a KRL variable name as a whole (no blank outside an index, nothing
+        before or after it); it matches a listed name case-insensitively, blanks inside an
+        index aside: ``$ov_pro`` and ``$OUT[ 1]`` match ``$OV_PRO`` and ``$OUT[1]``, while
+        ``$OV _PRO``, ``$OV_PRO[]`` or ``$OV_PRO `` match nothing.
+        """
+        if not _KRL_NAME.fullmatch(name):
+            return None
+        key = canonical(name)
+        return next((w for w in self.writable if canonical(w) == key), None)
 
 
 @dataclass(frozen=True)
@@ -136,8 +155,9 @@ class CellConfig:
 
 
 def canonical(name: str) -> str:
-    """The form two KRL names are compared in (KRL is case-insensitive, spaces do not count)."""
-    return name.replace(" ", "").upper()
+    """The form two valid KRL names are compared in: upper case (KRL is case-insensitive),
+    without the blanks inside an index (``$OUT[ 1]`` is ``$OUT[1]``)."""
+    return _INDEX.sub(lambda m: m.group(0).replace(" ", ""), name).upper()
 
 
 def is_loopback(host: str) -> bool:
@@ -209,7 +229,15 @@ def _security(raw: Any, host: str, base: Path, where: str) -> SecurityConfig:
             )
         return SecurityConfig(enabled=False, pki_dir=base / "pki")
     sec = _table(raw, f"{where}: [security]")
-    _no_extra(sec, {"enabled", "users", "pki_dir", "trusted_clients"}, f"{where}: [security]")
+    allowed = {
+        "enabled",
+        "users",
+        "pki_dir",
+        "trusted_clients",
+        "max_failed_logins",
+        "lockout_seconds",
+    }
+    _no_extra(sec, allowed, f"{where}: [security]")
     enabled = sec.get("enabled", True)
     if not isinstance(enabled, bool):
         raise CellError(f"{where}: security.enabled must be true or false")
@@ -238,7 +266,13 @@ def _security(raw: Any, host: str, base: Path, where: str) -> SecurityConfig:
     pki = base / _str(sec.get("pki_dir", "pki"), f"{where}: security.pki_dir")
     trusted = sec.get("trusted_clients")
     trusted_path = base / _str(trusted, f"{where}: security.trusted_clients") if trusted else None
-    return SecurityConfig(enabled, tuple(users), pki, trusted_path)
+    failures = sec.get("max_failed_logins", 5)
+    if not isinstance(failures, int) or isinstance(failures, bool) or not 1 <= failures <= 10**6:
+        raise CellError(f"{where}: security.max_failed_logins must be an integer in 1..1000000")
+    lockout = _number(sec.get("lockout_seconds", 60.0), f"{where}: security.lockout_seconds")
+    if not 1 <= lockout <= 86400:
+        raise CellError(f"{where}: security.lockout_seconds must be within 1..86400")
+    return SecurityConfig(enabled, tuple(users), pki, trusted_path, failures, lockout)
 
 
 def _robot(raw: Any, index: int, where: str) -> RobotConfig:
@@ -255,6 +289,7 @@ def _robot(raw: Any, index: int, where: str) -> RobotConfig:
         "allow_motion_writes",
         "max_axis_speed",
         "snapshot",
+        "max_value_chars",
     }
     _no_extra(r, allowed, what)
     name = _str(r.get("name"), f"{what}.name")
@@ -293,8 +328,11 @@ def _robot(raw: Any, index: int, where: str) -> RobotConfig:
     snaps = tuple(
         _snapshot(s, f"{what}.snapshot[{i}]") for i, s in enumerate(r.get("snapshot", []), 1)
     )
+    chars = r.get("max_value_chars", MAX_VALUE_CHARS)
+    if not isinstance(chars, int) or isinstance(chars, bool) or not 256 <= chars <= 65535:
+        raise CellError(f"{what}.max_value_chars must be an integer in 256..65535")
     return RobotConfig(
-        name, host, port, poll_hz, timeout, variables, writable, motion, speeds, snaps
+        name, host, port, poll_hz, timeout, variables, writable, motion, speeds, snaps, chars
     )
 
 

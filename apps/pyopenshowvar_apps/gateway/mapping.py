@@ -168,7 +168,9 @@ def poll_values(
             out[key] = converted
     temps = _floats(values.get("$MOT_TEMP[]"), 6) if want("$MOT_TEMP[]") else None
     if temps is not None:
-        out["temperature"] = [t - KELVIN for t in temps]
+        # rounded: 300 K - 273.15 is 26.850000000000023 in binary floating point, and a
+        # micro-kelvin is far below any motor sensor's resolution
+        out["temperature"] = [round(t - KELVIN, 6) for t in temps]
     if want("$OV_PRO") and isinstance(values.get("$OV_PRO"), int | float):
         out["override"] = float(values["$OV_PRO"])
     if want("$DRIVES_ON") and isinstance(values.get("$DRIVES_ON"), bool):

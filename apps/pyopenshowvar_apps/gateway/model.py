@@ -177,6 +177,9 @@ class Instantiator:
         new_id = ua.NodeId(node_id, self.ns)
         template = source if source is not None else type_definition
         item = await self._item(template, type_definition, parent, reference, new_id, browse_name)
+        # an instance is named after itself, not after its type or the placeholder it fills
+        # (a client's tree shows the DisplayName: "r1", never "MotionDeviceType")
+        set_attributes(item.NodeAttributes, {"DisplayName": ua.LocalizedText(browse_name.Name)})
         if attributes:
             set_attributes(item.NodeAttributes, attributes)
         batch.items.append(item)

@@ -7,7 +7,10 @@ its member variables). Only texts that changed since the last
 poll are parsed (the moving robot's fixed-format texts by the parser's fast paths), and only
 node values that changed are stored (:mod:`.live`: a DataValue is built only for a client that
 reads or subscribes), so a robot at rest costs the event loop almost nothing beyond the KVP
-round trip. Every value carries the time the reply arrived as its SourceTimestamp.
+round trip. Every value carries the time the reply arrived as its SourceTimestamp. No robot
+can take the event loop from the others (:mod:`.budget`): a value longer than the robot's
+``max_value_chars`` is not parsed, parsing hands the loop back every couple of milliseconds,
+and a robot whose parsing takes more than its share of the loop is polled less often.
 
 A robot that drops (connection lost, timeout, refused connection) turns all its live nodes
 Bad (BadNoCommunication, the value null, as OPC 10000-4 §7.7.1 asks) and ``Connected`` FALSE;
@@ -24,6 +27,7 @@ import contextlib
 import logging
 import math
 import random
+import re
 from collections.abc import Mapping, Sequence
 from datetime import UTC, datetime
 from typing import Any
@@ -34,6 +38,7 @@ from pyopenshowvar import Client, KrlEnum, KvpError, Struct, UnknownVariableErro
 from pyopenshowvar.errors import KrlValueError
 from pyopenshowvar.krl.parse import parse_number_list, parse_number_struct
 
+from .budget import ValueTooLongError, WorkBudget
 from .cell import RobotConfig, SnapshotGroup, canonical
 from .live import LiveNode, Sink
 from .mapping import (
@@ -103,6 +108,7 @@ class RobotPoller:
             if key in nodes.scalars
         ]
         self._connected = None if nodes.connected is None else live(nodes.connected)
+        self.budget = WorkBudget(cfg.name)
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -115,20 +121,22 @@ class RobotPoller:
                 await self._session()
                 backoff = BACKOFF_MIN
             except (KvpError, OSError, TimeoutError) as exc:
-                if self.connected or not self.last_error:
+                # jitter keeps 50 robots behind one switch from reconnecting in lockstep
+                delay = backoff * (0.8 + 0.4 * random.random())
+                if self.connected or _reason(exc) != self.last_error:  # news only
                     log.warning(
-                        "robot %s (%s:%d): %s", self.cfg.name, self.cfg.host, self.cfg.port, exc
-                    )
-                self.last_error = str(exc) or type(exc).__name__
+                        "robot %s (%s:%d): %s; reconnecting in %.1f s",
+                        self.cfg.name, self.cfg.host, self.cfg.port, _reason(exc), delay,
+                    )  # fmt: skip
+                self.last_error = _reason(exc) or type(exc).__name__
             except Exception as exc:  # a bug must not leave a robot's nodes Good and frozen
+                delay = backoff * (0.8 + 0.4 * random.random())
                 log.exception("robot %s: poller failed; reconnecting", self.cfg.name)
                 self.last_error = repr(exc)
             finally:
                 await self._disconnect()
             if self._stop.is_set():
                 break
-            # jitter keeps 50 robots behind one switch from reconnecting in lockstep
-            delay = backoff * (0.8 + 0.4 * random.random())
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self._stop.wait(), delay)
             backoff = min(backoff * 2, BACKOFF_MAX)
@@ -154,6 +162,7 @@ class RobotPoller:
         )
         self.client = client
         await client.connect()
+        self.budget.reset_warning()
         names = await self._identity(client)
         self.connected = True
         self.last_error = ""
@@ -167,13 +176,16 @@ class RobotPoller:
         while not self._stop.is_set():
             batch = names if count % SLOW_EVERY == 0 else fast
             count += 1
+            started = loop.time()
+            self.budget.begin()
             results = await client.read_many(batch, timeout=cfg.timeout)
             stamp = datetime.now(UTC)
             kept = await self._apply(results, names, stamp)
             if kept is not names:
                 names, fast = kept, [n for n in kept if n not in SLOW_VARIABLES]
             self.polls += 1
-            due = _next_slot(max(due, loop.time()), period, self.phase)
+            after = max(due, loop.time(), self.budget.earliest_next(started, period))
+            due = _next_slot(after, period, self.phase)
             # stop() cancels the task, so no per-poll waiter on the event
             await _sleep_until(loop, due)
 
@@ -189,7 +201,8 @@ class RobotPoller:
 
     async def _identity(self, client: Client) -> list[str]:
         results = await client.read_many(IDENTITY_VARIABLES, timeout=self.cfg.timeout)
-        values = {n: _parse(r.text) for n, r in results.items() if r.ok}
+        self.budget.begin()
+        values = {n: await self._parse_reply(n, r.text) for n, r in results.items() if r.ok}
         ident = identity_values(values)
         stamp = datetime.now(UTC)
         strings = {
@@ -283,10 +296,7 @@ class RobotPoller:
             if self._texts.get(name) == text:
                 continue  # the cheapest skip: same text, same value
             self._texts[name] = text
-            fast = _FAST_PARSE.get(name)
-            value = fast(text) if fast is not None else None
-            if value is None:
-                value = _parse(text)
+            value = await self._parse_reply(name, text)
             snapshot = self._snapshot(name)
             if snapshot is not None:
                 changed |= self._fan_out(snapshot, value)
@@ -299,6 +309,25 @@ class RobotPoller:
             self.sink.put(self._connected, True, _V.Boolean, stamp)
         await self.sink.flush()
         return keep
+
+    async def _parse_reply(self, name: str, text: str) -> Any:
+        """One reply's value, within the robot's size cap and budget (:mod:`.budget`)."""
+        if len(text) > self.cfg.max_value_chars:
+            raise ValueTooLongError(
+                f"{name} answered {len(text)} characters, over max_value_chars ="
+                f" {self.cfg.max_value_chars}: not parsed (raise max_value_chars in the cell"
+                " file for a long variable of your own)"
+            )
+        budget = self.budget
+        t0 = budget.clock()
+        fast = _FAST_PARSE.get(name)
+        value = fast(text) if fast is not None else None
+        if value is None:
+            value = _parse(text)
+        budget.charge(budget.clock() - t0)
+        if budget.should_yield():
+            await asyncio.sleep(0)  # the other robots and the OPC UA clients get their turn
+        return value
 
     def _snapshot(self, name: str) -> SnapshotGroup | None:
         return next((s for s in self.cfg.snapshots if s.variable == name), None)
@@ -428,6 +457,17 @@ async def _sleep_until(loop: asyncio.AbstractEventLoop, when: float) -> None:
 def _wake(waiter: asyncio.Future[None]) -> None:
     if not waiter.done():
         waiter.set_result(None)
+
+
+# pyopenshowvar.core's advice to a client without auto_reconnect, in both of its forms
+_NO_RECONNECT = re.compile(
+    r" \(auto_reconnect is off(: call connect\(\) to open a new connection)?\)"
+)
+
+
+def _reason(exc: BaseException) -> str:
+    """The client's error without its advice to reconnect by hand: the poller reconnects."""
+    return _NO_RECONNECT.sub("", str(exc))
 
 
 def _parse(text: str) -> Any:

@@ -11,7 +11,9 @@ nodes; :attr:`Gateway.timings` has the seconds each step took (``kvp gateway`` l
 bench/gateway.py reports them). Security (docs/gateway.md): on a loopback endpoint without a
 [security] table the server offers None/Anonymous only; otherwise it offers nothing but
 Basic256Sha256 Sign&Encrypt with user name and password, so an anonymous or unencrypted
-client is refused before it sees a single node.
+client is refused before it sees a single node; every login is decided by
+:class:`~.security.LoginGuard` (off the event loop, rate-limited per client address, only
+trusted client certificates when ``trusted_clients`` is set) through :mod:`.sessions`.
 """
 
 from __future__ import annotations
@@ -19,8 +21,10 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import gc
+import importlib.metadata
 import logging
 import time
+from datetime import UTC, datetime
 from types import TracebackType
 from typing import Self
 from urllib.parse import urlsplit
@@ -33,7 +37,8 @@ from .live import Sink
 from .model import GATEWAY_URI, Instantiator, load_nodesets
 from .poller import RobotPoller
 from .robotics import CellNodes, RobotBuilder, RobotNodes, build_cell
-from .security import GatewayUserManager, ensure_certificate
+from .security import LoginGuard, ensure_certificate, trust_check
+from .sessions import GatewayServer
 from .writes import WRITE_METHOD, add_write_method
 
 __all__ = ["Gateway"]
@@ -61,6 +66,13 @@ class Gateway:
         self.fingerprint: str | None = None
         self.port = 0
         self._tasks: list[asyncio.Task[None]] = []
+        sec = cell.security
+        self.guard = LoginGuard(
+            sec.users,
+            anonymous=not sec.enabled,
+            max_failures=sec.max_failed_logins,
+            window=sec.lockout_seconds,
+        )
 
     @property
     def url(self) -> str:
@@ -84,16 +96,20 @@ class Gateway:
 
     async def _start(self) -> None:
         cell = self.cell
-        sec = cell.security
         t0 = time.perf_counter()
-        server = Server(user_manager=GatewayUserManager(sec.users, anonymous=not sec.enabled))
+        server = GatewayServer(self.guard)
         await server.init()
         self.timings["address_space"] = time.perf_counter() - t0
         self.server = server
         server.set_server_name(f"pyopenshowvar kvp gateway ({cell.name})")
         await server.set_application_uri(self.application_uri)
-        server.product_uri = "urn:pyopenshowvar:kvp-gateway"
+        server.product_uri = GATEWAY_URI
         server.manufacturer_name = "pyopenshowvar"
+        # init() filled BuildInfo with asyncua's own product; a client must see ours
+        await server.set_build_info(
+            GATEWAY_URI, "pyopenshowvar", "pyopenshowvar kvp gateway", _version(), _version(),
+            datetime.now(UTC),
+        )  # fmt: skip
         server.allow_remote_admin(False)
         # asyncua accepts 100 MB messages by default; a SCADA's requests and our answers are
         # far below 16 MB, and a client must not make us buffer more
@@ -164,6 +180,9 @@ class Gateway:
 
             store = TrustStore([sec.trusted_clients], [])
             await store.load()
+            # checked at every login, on the secure channel's own certificate (asyncua checks
+            # CreateSession's copy, which a client may leave out)
+            self.guard.trusts = trust_check(store)
             # time range and application URI as usual, plus: in the trust store (the default
             # options check no trust at all)
             opts = (
@@ -199,6 +218,7 @@ class Gateway:
         if self.server is not None:
             await self.server.stop()
             self.server = None
+        self.guard.close()
 
     async def __aenter__(self) -> Self:
         try:
@@ -215,6 +235,13 @@ class Gateway:
         tb: TracebackType | None,
     ) -> None:
         await self.stop()
+
+
+def _version() -> str:
+    try:
+        return importlib.metadata.version("pyopenshowvar")
+    except importlib.metadata.PackageNotFoundError:  # pragma: no cover - a source tree
+        return "0"
 
 
 def _url_host(host: str) -> str:

@@ -7,8 +7,10 @@ echo back, plus the program stop the write caused, if any. The rules are ``kvp w
 (:mod:`pyopenshowvar_apps.writecheck`, shared with the REPL and the monitor):
 
 * the name must be listed in the robot's ``writable`` (the cell file; a motion variable needs
-  ``allow_motion_writes`` too, the cell file's equivalent of the monitor's confirmation) —
-  anything else is BadUserAccessDenied and nothing is sent;
+  ``allow_motion_writes`` too, the cell file's equivalent of the monitor's confirmation),
+  case-insensitively but otherwise as a whole (:meth:`~.cell.RobotConfig.writable_name`:
+  ``$OV _PRO`` or ``$OV_PRO[]`` is not ``$OV_PRO``) — anything else is BadUserAccessDenied and
+  nothing is sent; the name sent is the cell file's;
 * the literal must parse as a KRL value (BadInvalidArgument, with the parser's reason);
 * a write the controller refuses is BadTypeMismatch when the value does not fit the variable's
   type, else BadNotWritable, the likely reason logged as ``kvp write`` prints it;
@@ -57,11 +59,13 @@ async def write_variable(poller: RobotPoller, name: Any, literal: Any) -> tuple[
     cfg = poller.cfg
     if not isinstance(name, str) or not isinstance(literal, str) or len(literal) > _MAX_LITERAL:
         raise _fail(ua.StatusCodes.BadInvalidArgument, f"{cfg.name}: bad arguments")
-    if not cfg.is_writable(name):
+    listed = cfg.writable_name(name)
+    if listed is None:
         raise _fail(
             ua.StatusCodes.BadUserAccessDenied,
             f"{cfg.name}: {name!r} is not listed writable in the cell file",
         )
+    name = listed  # what is written is exactly what the cell file lists
     problem = check_literal(literal)
     if problem is not None:
         raise _fail(
