@@ -20,7 +20,9 @@ This module must stay cheap to import: ``kvp read`` is on the hot path of shell 
 
 from __future__ import annotations
 
+import logging
 import math
+import os
 from collections.abc import Awaitable, Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn, TypeVar
@@ -79,6 +81,8 @@ class Opts:
     emulator: Any = None
     #: The embedded emulator's plant (``--plant``): "dynamic" or "ideal".
     plant = "dynamic"
+    #: Undoes the quieter log of the embedded emulator (see ``_quiet_emulator_log``).
+    log_restore: Callable[[], None] | None = None
 
     @classmethod
     def reset(cls, host: str, port: int, timeout: float, emulate: bool) -> None:
@@ -159,11 +163,46 @@ def start_embedded_emulator(
         plant=Opts.plant,
         **extra,
     )
+    _quiet_emulator_log()
     Opts.emulator = EmulatorThread(config).start()
     Opts.host, Opts.port = "127.0.0.1", Opts.emulator.port
     if ctx is not None:
         ctx.find_root().call_on_close(stop_embedded_emulator)
     return Opts.emulator
+
+
+class _EmulatorErrors(logging.Handler):
+    """The embedded emulator's errors on stderr as ``kvp: emulator: ...`` lines."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.ERROR)
+
+    def emit(self, record: logging.LogRecord) -> None:
+        typer.echo(f"kvp: emulator: {record.getMessage()}", err=True)
+
+
+def _quiet_emulator_log() -> None:
+    """Show only the embedded emulator's errors (all of its log with ``KVP_DEBUG=1``), until
+    :func:`stop_embedded_emulator`.
+
+    It stands in for the robot, and a robot prints nothing on your terminal: the commands
+    report what it does themselves (``kvp write`` says that the program stopped and why), so
+    its own warnings only said the same twice (the stop message), and would break the
+    monitor's screen. What it would warn about stays readable: ``$PRO_STATE1``, ``$STOPMESS``,
+    ``$EMU_MESSAGE[]``.
+    """
+    logger = logging.getLogger("kukavarproxy_emu")
+    if os.environ.get("KVP_DEBUG") or any(isinstance(h, _EmulatorErrors) for h in logger.handlers):
+        return
+    handler, propagate = _EmulatorErrors(), logger.propagate
+    logger.addHandler(handler)
+    logger.propagate = False
+
+    def restore() -> None:  # the CLI also runs in-process (tests): leave logging as it was
+        logger.removeHandler(handler)
+        logger.propagate = propagate
+
+    Opts.log_restore = restore
 
 
 def stop_embedded_emulator() -> None:
@@ -176,6 +215,9 @@ def stop_embedded_emulator() -> None:
     thread, Opts.emulator = Opts.emulator, None
     if thread is not None:
         thread.stop()
+    restore, Opts.log_restore = Opts.log_restore, None
+    if restore is not None:
+        restore()
 
 
 def fail(code: int, message: str) -> NoReturn:
