@@ -23,7 +23,9 @@ from __future__ import annotations
 import logging
 import math
 import os
-from collections.abc import Awaitable, Callable, Sequence
+import time
+from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
+from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn, TypeVar
 
@@ -61,6 +63,9 @@ STOP_WINDOW = 0.2
 STOP_WINDOW_HELP = (
     "Seconds to watch $PRO_STATE1/$STOPMESS for a program stop after a write (0: do not watch)."
 )
+
+#: Seconds between two attempts to connect to a proxy that refuses (see connect_blocking).
+CONNECT_RETRY = 0.1
 
 T = TypeVar("T")
 
@@ -258,11 +263,56 @@ def make_client(**kw: Any) -> Client:
     return Client(host, port, timeout=Opts.timeout, **kw)
 
 
+def _refused(exc: KvpConnectionError) -> bool:
+    return isinstance(exc.__cause__, ConnectionRefusedError)
+
+
+@asynccontextmanager
+async def open_client(**kw: Any) -> AsyncIterator[Client]:
+    """:func:`make_client`, connected: a proxy that refuses the connection is asked again
+    every ``CONNECT_RETRY`` seconds until ``--timeout`` (see :func:`connect_blocking`)."""
+    import asyncio
+
+    client = make_client(**kw)
+    deadline = time.monotonic() + Opts.timeout
+    try:
+        while True:
+            try:
+                await client.connect()
+                break
+            except KvpConnectionError as exc:
+                if not _refused(exc) or time.monotonic() + CONNECT_RETRY > deadline:
+                    raise
+            await asyncio.sleep(CONNECT_RETRY)
+        yield client
+    finally:
+        await client.close()
+
+
+def connect_blocking(client: sync.Client) -> None:
+    """Connect ``client``, asking a proxy that refuses again until ``--timeout``.
+
+    A refused connection is an answer, but often a passing one: an emulator started in the
+    background a moment before (``kukavarproxy-emu ... &`` and then ``kvp read`` on the next
+    line of a script) refuses until it has loaded, which takes about a second. Other failures
+    (no route, a timeout) are reported at once.
+    """
+    deadline = time.monotonic() + Opts.timeout
+    while True:
+        try:
+            client.connect()
+            return
+        except KvpConnectionError as exc:
+            if not _refused(exc) or time.monotonic() + CONNECT_RETRY > deadline:
+                raise
+        time.sleep(CONNECT_RETRY)
+
+
 def run(job: Callable[[Client], Awaitable[T]], **client_kw: Any) -> T:
     """Run ``job`` with a connected client; every library error becomes one line + exit code."""
 
     async def main() -> T:
-        async with make_client(**client_kw) as kvp:
+        async with open_client(**client_kw) as kvp:
             return await job(kvp)
 
     import asyncio  # not at module level: kvp read runs without it (run_blocking)
@@ -283,7 +333,9 @@ def run_blocking(job: Callable[[sync.Client], T]) -> T:
 
     host, port = Opts.endpoint()
     try:
-        with sync.Client(host, port, timeout=Opts.timeout, keepalive=None) as kvp:
+        kvp = sync.Client(host, port, timeout=Opts.timeout, keepalive=None)
+        connect_blocking(kvp)
+        with kvp:
             return job(kvp)
     except KvpError as exc:
         fail_for(exc)
