@@ -76,9 +76,9 @@ def run(quick: bool, seconds: float, repeat: int) -> tuple[list[Row], dict[str, 
                 pct, rate = _cpu_percent(args, seconds, snap)
                 runs.append(pct)
                 rates.append(rate)
-            note = ""
+            note = "runs: " + " / ".join(f"{x:.1f} %" for x in runs)
             if snap is not None:
-                note = f"SPS passes per second of the idle stretch: {median(rates):.1f} (1 / 12 ms = 83.3)"
+                note += f"; SPS passes per second: {median(rates):.1f} (one per 12 ms: 83.3)"
             rows.append(
                 Row(
                     f"CPU at rest, {label}",

@@ -147,3 +147,25 @@ def test_a_snapshot_pass_is_a_third_of_the_tree_walks_work(
     monkeypatch.setattr(plan_module.AssignPlan, "compile", classmethod(lambda cls, ev, st: None))
     walked = _calls_per_pass(robot(tmp_path / "w"))
     assert planned <= 0.4 * walked, (planned, walked)
+
+
+async def test_a_resting_robot_with_a_snapshot_sps_wakes_once_per_coast(tmp_path: Path) -> None:
+    """On its real clock: far fewer wake-ups of the process than IPO ticks (the coast), every
+    tick still run (the pass counter counts each one)."""
+    import asyncio
+
+    from kukavarproxy_emu import Emulator
+
+    dat, sub = CELL.write_krl(tmp_path)
+    config = replace(TEST_CONFIG, config_files=(dat,), sps=str(sub))
+    async with Emulator(config) as emu:
+        r = emu.robot
+        assert r is not None and r.clock._wheel is not None
+        await asyncio.sleep(0.5)  # settled
+        wheel, clock = r.clock._wheel, r.clock
+        fires, ticks, cycle = wheel.fires, clock.ticks, emu.store.get("CELL.CYCLE")
+        await asyncio.sleep(1.0)
+        r.sync()
+        fires, ticks = wheel.fires - fires, clock.ticks - ticks
+        assert ticks >= 20 and fires <= 0.35 * ticks, (fires, ticks)
+        assert emu.store.get("CELL.CYCLE") == cycle + ticks  # type: ignore[operator]
