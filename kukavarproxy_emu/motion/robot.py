@@ -147,7 +147,7 @@ class Robot:
             if self.sps is not None:
                 before = store.mutations - store.stale_marks
                 self.sps.step()
-                if self.sps.light:  # its writes do not keep the clock awake (see below)
+                if self._light_sps():  # its writes do not keep the clock awake (see below)
                     sps_changes = store.mutations - store.stale_marks - before
             self.kernel.tick()
             # the texts clients poll every cycle, formatted here rather than in their replies
@@ -169,8 +169,13 @@ class Robot:
             and skips is not None
             and now is not None
             and now[0] == skips[0] + skips[2]
-            and (now[1] == skips[1] + skips[3] or (self.sps is not None and self.sps.light))
+            and (now[1] == skips[1] + skips[3] or self._light_sps())
         )
+
+    def _light_sps(self) -> bool:
+        """The SPS made a light pass and may let the clock coast (see :meth:`tick`); not with
+        a latency profile (a clock gate): a coast's catch-up would make a reply late."""
+        return self.sps is not None and self.sps.light and self.clock.gate is None
 
     def _skips(self) -> tuple[int, int, int, int] | None:
         """The KRL passes skipped as exact repeats so far (program, SPS) and how many a quiet
