@@ -169,3 +169,20 @@ async def test_a_resting_robot_with_a_snapshot_sps_wakes_once_per_coast(tmp_path
         fires, ticks = wheel.fires - fires, clock.ticks - ticks
         assert ticks >= 20 and fires <= 0.35 * ticks, (fires, ticks)
         assert emu.store.get("CELL.CYCLE") == cycle + ticks  # type: ignore[operator]
+
+
+async def test_with_a_latency_profile_the_snapshot_robot_does_not_coast(tmp_path: Path) -> None:
+    """Replies first: a coast's catch-up of ticks that copy readings would make a reply late."""
+    import asyncio
+
+    from kukavarproxy_emu import Emulator
+
+    dat, sub = CELL.write_krl(tmp_path)
+    config = replace(TEST_CONFIG, config_files=(dat,), sps=str(sub), latency="kvp")
+    async with Emulator(config) as emu:
+        r = emu.robot
+        assert r is not None
+        await asyncio.sleep(0.5)
+        coasted, ticks = r.clock.coasted, r.clock.ticks
+        await asyncio.sleep(0.5)
+        assert r.clock.ticks - ticks >= 10 and r.clock.coasted == coasted
