@@ -30,7 +30,15 @@ from pyopenshowvar.krl import KrlValue, Struct
 from ..slot import Slot
 from ..values import Refused
 from . import ast
-from .runtime import KRL_WRITABLE, Evaluator, KrlRuntimeError, _short, convert, render
+from .runtime import (
+    KRL_WRITABLE,
+    Evaluator,
+    KrlRuntimeError,
+    _short,
+    convert,
+    literal_path,
+    render,
+)
 
 if TYPE_CHECKING:
     from ..store import VariableStore
@@ -38,21 +46,6 @@ if TYPE_CHECKING:
 __all__ = ["AssignPlan"]
 
 _LITERALS = (ast.IntLit, ast.RealLit, ast.BoolLit, ast.StrLit)
-
-
-def _fixed_path(expr: ast.Expr) -> bool:
-    """An lvalue whose text never changes: names, members, literal indices."""
-    if isinstance(expr, ast.Name):
-        return True
-    if isinstance(expr, ast.Member):
-        return _fixed_path(expr.base)
-    if isinstance(expr, ast.Index):
-        return (
-            bool(expr.indices)
-            and all(isinstance(i, ast.IntLit) for i in expr.indices)
-            and (_fixed_path(expr.base))
-        )
-    return False
 
 
 class AssignPlan:
@@ -76,7 +69,7 @@ class AssignPlan:
     def compile(cls, ev: Evaluator, stmt: ast.Assign) -> AssignPlan | None:
         """The plan of ``stmt``, or None when it is not one of the simple forms."""
         store, value = ev.store, stmt.value
-        if not _fixed_path(stmt.target):
+        if not literal_path(stmt.target):
             return None
         op: str | None = None
         constant: KrlValue | None = None
@@ -88,7 +81,7 @@ class AssignPlan:
             if op is not None:
                 return None
             source, constant = None, value.value
-        elif _fixed_path(value):
+        elif literal_path(value):
             source = _slot(store, value)
             if source is None:
                 return None

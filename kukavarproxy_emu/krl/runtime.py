@@ -40,6 +40,8 @@ __all__ = [
     "Evaluator",
     "Frame",
     "KrlRuntimeError",
+    "convert",
+    "literal_path",
     "render",
 ]
 
@@ -217,7 +219,7 @@ class Evaluator:
                 return store, text, base
         store, text, base = self._ref(expr)
         declared = store.declaration(base.name)
-        if declared is not None and _literal_path(expr):
+        if declared is not None and literal_path(expr):
             self._refs[id(expr)] = (declared, store, text, base)
         return store, text, base
 
@@ -469,14 +471,14 @@ def convert(
     raise KrlRuntimeError(f"type mismatch: cannot assign {_type_of(value)} to {type_name}", node)
 
 
-def _literal_path(expr: ast.Expr) -> bool:
-    """An lvalue made by the parser whose indices are all literals (its text never changes)."""
+def literal_path(expr: ast.Expr) -> bool:
+    """An lvalue whose text never changes: names, members, literal indices (``NAME[]`` too)."""
     if isinstance(expr, ast.Name):
         return True
     if isinstance(expr, ast.Member):
-        return _literal_path(expr.base)
+        return literal_path(expr.base)
     if isinstance(expr, ast.Index):
-        return all(isinstance(i, ast.IntLit) for i in expr.indices) and _literal_path(expr.base)
+        return all(isinstance(i, ast.IntLit) for i in expr.indices) and literal_path(expr.base)
     return False
 
 
