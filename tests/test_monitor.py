@@ -10,6 +10,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from rich.console import Console
 
@@ -17,7 +18,7 @@ pytest.importorskip("textual")
 
 from pyopenshowvar_apps.monitor.app import MonitorApp
 from pyopenshowvar_apps.monitor.dialogs import ConfirmDialog, InputDialog
-from pyopenshowvar_apps.monitor.plot import levels_of
+from pyopenshowvar_apps.monitor.plot import levels_of, noise
 from pyopenshowvar_apps.monitor.state import RobotState
 from pyopenshowvar_apps.monitor.watchlist import WatchList
 from pyopenshowvar_apps.names import is_motion_variable
@@ -223,6 +224,14 @@ async def test_fast_typing_into_the_edit_and_add_dialogs_loses_nothing(
         assert emulator.store.read("MYINT") == "79" and app.screen is app.screen_stack[0]
         burst(app, "a", *"$OV_JOG", "enter")
         await until(pilot, lambda: app.watchlist.names == ["MYINT", "$OV_JOG"])
+
+
+def test_the_noise_estimate_ignores_smooth_motion() -> None:
+    rng = np.random.default_rng(3)
+    still = 5.0 + rng.normal(0.0, 0.4, 200)
+    ramp = np.linspace(0.0, 90.0, 200) + rng.normal(0.0, 0.4, 200)
+    assert 0.3 < noise(list(still)) < 0.5 and 0.3 < noise(list(ramp)) < 0.5
+    assert noise([1.0, 2.0]) == 0.0
 
 
 def test_levels_draw_noise_flat_and_motion_full_height() -> None:

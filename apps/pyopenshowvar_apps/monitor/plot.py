@@ -2,12 +2,16 @@
 
 Textual's own :class:`~textual.widgets.Sparkline` stretches whatever the data spans over its
 full height, so a robot standing still drew its encoder noise (10⁻⁴°) and its torque noise as
-wild swings. :class:`Plot` gives every level of the plot at least ``resolution`` (a change
-smaller than that is not a motion worth drawing): while the history spans less than the plot's
-levels × ``resolution``, each level is one ``resolution`` step and the median of the history
-sits in the middle of a level, so noise around a value at rest is drawn as a flat line; a
-larger span is drawn over the full height, as before. Each column shows the mean of the
-samples that fall into it.
+wild swings. :class:`Plot` gives every level of the plot a minimum height, the larger of
+
+* ``resolution``, the precision the panels print (a smaller change is not shown anywhere), and
+* ``NOISE_STEPS`` times the sensor noise, estimated from the history itself (:func:`noise`):
+  the plot does not draw what the sensor cannot tell from noise.
+
+While the history spans less than the plot's levels × that height, each level is one step and
+the median of the history sits in the middle of a level, so noise around a value at rest is
+drawn as a flat line; a larger span is drawn over the full height, as before. Each column shows
+the mean of the samples that fall into it.
 """
 
 from __future__ import annotations
@@ -24,10 +28,26 @@ from textual.app import RenderResult as TextualRenderResult
 from textual.renderables._blend_colors import blend_colors
 from textual.widgets import Sparkline
 
-__all__ = ["BARS", "Plot", "levels_of"]
+__all__ = ["BARS", "NOISE_STEPS", "Plot", "levels_of", "noise"]
 
 #: One line of a plot has eight levels.
 BARS = "▁▂▃▄▅▆▇█"
+#: A level is at least this many standard deviations of the noise tall: the noise (±6 σ) stays
+#: within the level the median sits in.
+NOISE_STEPS = 12
+
+
+def noise(data: Sequence[float]) -> float:
+    """The standard deviation of the samples' noise: robust, and blind to smooth motion.
+
+    Second differences remove a motion's steady part (a constant speed gives 0), and their
+    median absolute value ignores the few a change of speed disturbs; white noise of σ gives
+    second differences of √6·σ, whose median absolute value is 0.6745 times that.
+    """
+    if len(data) < 5:
+        return 0.0
+    second = [abs(data[i + 1] - 2.0 * data[i] + data[i - 1]) for i in range(1, len(data) - 1)]
+    return statistics.median(second) / (0.6745 * math.sqrt(6.0))
 
 
 def _columns(data: Sequence[float], width: int) -> list[float]:
@@ -68,7 +88,8 @@ class _Bars:
         width, height = options.max_width, max(1, self.height)
         columns = _columns(self.data, width) if self.data else [0.0] * width
         total = 8 * height
-        levels = levels_of(columns, self.resolution, total)
+        step = max(self.resolution, NOISE_STEPS * noise(self.data))
+        levels = levels_of(columns, step, total)
         shades = {
             lv: Style.from_color(blend_colors(*self.colors, lv / (total - 1))) for lv in set(levels)
         }
@@ -88,7 +109,8 @@ class _Bars:
 
 
 class Plot(Sparkline):
-    """A :class:`~textual.widgets.Sparkline` that draws changes below ``resolution`` flat."""
+    """A :class:`~textual.widgets.Sparkline` that draws noise and changes below ``resolution``
+    flat (see the module)."""
 
     def __init__(self, *, resolution: float, id: str | None = None) -> None:
         super().__init__([], id=id)

@@ -23,10 +23,9 @@ from .plot import Plot
 from .state import AXES, RobotState
 
 BAR_WIDTH = 11
-#: Changes the history plots draw flat: the precision the joints panel prints (encoder noise
-#: is far below it), and for torques more than the noise of $TORQUE_AXIS_ACT at standstill
-#: (the emulator's dynamic plant: σ ≈ 0.4 Nm on A1).
-RESOLUTION = {"joints": 0.01, "torques": 2.0}
+#: The smallest change the history plots draw: the precision the panels print (each plot also
+#: draws its sensor's noise flat, see :mod:`.plot`).
+RESOLUTION = {"joints": 0.01, "torques": 0.1}
 
 
 def limit_bar(
