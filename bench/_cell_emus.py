@@ -26,7 +26,7 @@ import numpy as np
 from kukavarproxy_emu import Emulator, EmulatorConfig
 from pyopenshowvar.krl import E6Axis
 
-#: ``--snapshot``: the STRUC an SPS would fill on a real KRC (issue 11's snapshot groups); the
+#: ``--snapshot``: the STRUC an SPS would fill on a real KRC (a snapshot group); the
 #: animator writes its AX member like the motion variables, the rest stays constant.
 SNAPSHOT_DAT = """DEFDAT $CONFIG
 STRUC GWSNAP_T E6AXIS AX, INT OV, BOOL DR, BOOL AS, BOOL US, BOOL SM

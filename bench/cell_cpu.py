@@ -3,7 +3,7 @@
 Each cell is ``kukavarproxy-emu --robots N`` (``bench/_emu_server.py``, its own process) with
 the defaults a user gets: the dynamic (MuJoCo) plant, the ``follow`` program (``LOOP PTP MYAXIS
 C_PTP ENDLOOP``) and the shipped SPS, real time, 12 ms IPO. The figure is the emulator
-process' CPU time over wall time, divided by N (% of one core per robot); issue 11's targets
+process' CPU time over wall time, divided by N (% of one core per robot); the targets
 are ≤ 1 % at rest and ≤ 5 % moving. Scenarios:
 
 * at rest — nobody connected, the robots stand still;

@@ -304,7 +304,7 @@ def run(quick: bool, repeat: int) -> tuple[list[Row], dict[str, Any]]:
             note=(
                 f"limit = 1 / (mean read {t_read * 1e3:.3f} ms + mean write {t_write * 1e3:.3f} ms,"
                 f" stalls included) = {limit:.1f} /s: a client with no turnaround of its own. The"
-                " profile's samples are round trips as seen by a client (issue 17), so this"
+                " profile's samples are round trips as seen by a client, so this"
                 " client's own time per cycle and the wake-ups of both processes count on top"
                 " of them, as they would against a real KRC"
             ),
@@ -320,7 +320,7 @@ def run(quick: bool, repeat: int) -> tuple[list[Row], dict[str, Any]]:
             target=("ratio", ">=", 0.95),
             runs=cycles_robot,
             note=(
-                "issue 11: the robot's tick runs in the shadow of booked replies and formats"
+                "the robot's tick runs in the shadow of booked replies and formats"
                 " the polled texts, so it costs the cycle nothing measurable;"
                 f" {median(cycles_robot) / limit:.3f} of the limit in this run"
             ),

@@ -6,7 +6,7 @@ The load comes from separate processes too, one per client, each a plain blockin
 keeping ``--depth`` read requests in flight (send a batch, read the batch's replies by byte
 count, repeat), so neither the GIL nor an asyncio client is the bottleneck. While the load runs,
 the IPO clock's tick lateness (p50/p99/max) and the emulator's RSS are taken from the server.
-The peer is the real KUKAVARPROXY's measured throughput (protocol reference §6: ~350–400
+The peer is the real KUKAVARPROXY's measured throughput (the NTNU measurements, ivareri/KUKAVARPROXY_tests: ~350–400
 requests/s in total, whatever the number of clients).
 
     .venv/bin/python bench/emu_throughput.py [--quick] [--repeat 3] [--seconds 3] [--depth 16]
@@ -27,7 +27,7 @@ from _common import EmuProcess, Row, base_parser, median, print_rows, write_json
 
 from pyopenshowvar.protocol import encode_read
 
-#: Real KVP on a KRC (reference §6): the single proxy thread serves ~350–400 requests/s.
+#: Real KVP on a KRC (the NTNU measurements, ivareri/KUKAVARPROXY_tests): the single proxy thread serves ~350–400 requests/s.
 KVP_REQUESTS_PER_S = 400.0
 NAMES = ("$OV_PRO", "$AXIS_ACT", "$POS_ACT", "$TORQUE_AXIS_ACT[3]")
 
@@ -119,7 +119,7 @@ def run(quick: bool, repeat: int, seconds: float, depth: int) -> tuple[list[Row]
                 median(rates[n]),
                 "req/s",
                 peer=KVP_REQUESTS_PER_S,
-                peer_name="real KVP (§6)",
+                peer_name="real KVP (NTNU)",
                 target=("ours", ">=", 20_000.0) if n == 10 else None,
                 runs=rates[n],
             )

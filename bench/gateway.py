@@ -11,7 +11,7 @@ this script, an asyncua client that subscribes to A1's ActualPosition of every r
 gateway process's own user+system time over the measuring window, as % of one core. Latency
 is the client's receive time minus the value's SourceTimestamp, which the gateway sets to the
 arrival of the KVP reply the value came from: "a subscribed client sees a new value within
-200 ms of its KVP read". Targets (issue 15): gateway ≤ 50 % of one core with 50 robots at
+200 ms of its KVP read". Targets: gateway ≤ 50 % of one core with 50 robots at
 10 Hz; every update within 200 ms.
 """
 
@@ -191,7 +191,7 @@ def main() -> None:
     ap.add_argument(
         "--snapshot",
         action="store_true",
-        help="a snapshot group: $AXIS_ACT and five scalars in one STRUC read (issue 11)",
+        help="a snapshot group: $AXIS_ACT and five scalars in one STRUC read",
     )
     ap.add_argument(
         "--robots-per-process", type=int, default=10, help="emulated robots per process"

@@ -5,7 +5,7 @@ clock (12 ms, ``speed = 1``) in an asyncio loop for ``--seconds`` per scenario; 
 process CPU time / wall time. Scenarios: at rest and moving (back-to-back 100 % PTPs between
 two poses), each without a reader and with one that reads ``$AXIS_ACT`` and
 ``$TORQUE_AXIS_ACT[]`` every cycle (in process, so the TCP server's cost is not counted; the
-dynamic plant computes its readings only when they are read). The targets are issue 11's:
+dynamic plant computes its readings only when they are read). The targets are the emulator's:
 ≤ 1 % of a core per robot at rest and ≤ 5 % moving (50 robots in one process).
 
     .venv/bin/python bench/plant_cpu.py [--quick] [--seconds 4] [--json PATH]
@@ -87,7 +87,7 @@ async def main_async(seconds: float) -> list[Row]:
                         pct,
                         "%",
                         target=("ours", "<=", TARGETS[state]),
-                        note="issue 11 target, here with this process' whole 12 ms wake-up floor"
+                        note="target per robot, here with this process' whole 12 ms wake-up floor"
                         " (first row); per robot in a cell: bench/cell_cpu.py"
                         if plant == "dynamic" and not reader
                         else "",

@@ -30,6 +30,7 @@ BEGIN, END = "<!-- BEGIN GENERATED -->", "<!-- END GENERATED -->"
 SCRIPTS = [
     ("Client", "client_roundtrip.py"),
     ("Snapshots", "snapshot.py"),
+    ("Snapshot SPS at rest", "snapshot_cpu.py"),
     ("Codec", "codec.py"),
     ("Emulator", "emu_throughput.py"),
     ("Kinematics", "kinematics.py"),

@@ -1,4 +1,4 @@
-"""Snapshot benchmark: 20 variables in ONE request vs py-openshowvar's loop of 20 reads (issue 11).
+"""Snapshot benchmark: 20 variables in ONE request vs py-openshowvar's loop of 20 reads.
 
 The emulator (own process, ``--latency kvp``: the measured KRC4 + KUKAVARPROXY service times,
 one proxy worker) runs the generated KRL exactly as the docs tell a user to install it:
@@ -78,7 +78,7 @@ PROGRAM = """DEF SNAPBENCH()
 END
 """
 #: A KRC4 formats a longer reply more slowly: read INT 2.14 ms vs E6AXIS 2.29 ms (median,
-#: reference §6), ~0.15 ms for ~150 more characters: about 1 µs per character.
+#: the NTNU measurements, ivareri/KUKAVARPROXY_tests), ~0.15 ms for ~150 more characters: about 1 µs per character.
 KRC4_US_PER_CHAR = 1.0
 #: The text length of an E6AXIS reply, the kind of read the `kvp` profile's medians describe.
 PROFILE_TEXT = 150
@@ -206,7 +206,7 @@ def run(quick: bool, repeat: int) -> tuple[list[Row], dict[str, Any]]:
             peer=median(peer) if has_peer else None,
             peer_name="py-openshowvar loop",
             note=f"{text:.0f} characters: +{extra_ms:.2f} ms at {KRC4_US_PER_CHAR} µs/char"
-            " (reference §6: INT vs E6AXIS read medians); the SPS pass adds age, not time",
+            " (NTNU's INT vs E6AXIS read medians); the SPS pass adds age, not time",
         )
     )
     return rows, {"seeds": [SEED + i for i in range(repeat)], "reply_chars": text}

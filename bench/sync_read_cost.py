@@ -1,4 +1,4 @@
-"""Where a serial read's time goes: the synchronous client against py-openshowvar (issue 14).
+"""Where a serial read's time goes: the synchronous client against py-openshowvar.
 
 ``bench/client_roundtrip.py`` measures the whole round trip, which the emulator and the
 scheduler dominate; this script takes the client's two own costs apart:

@@ -535,8 +535,13 @@ class Emulator:
             from .kvp9_connection import Kvp9Connection  # late: it imports this module
 
             factory = Kvp9Connection
+        # bound now (the port is known), served only once everything below is set up
         self._server = await loop.create_server(
-            lambda: factory(self), self.config.host, self.config.port, reuse_address=True
+            lambda: factory(self),
+            self.config.host,
+            self.config.port,
+            reuse_address=True,
+            start_serving=False,
         )
         self.host, self.port = self._server.sockets[0].getsockname()[:2]
         if self.c3 is not None:
@@ -553,8 +558,34 @@ class Emulator:
                 raise
             if self.c3 is not None:
                 self.c3.control.robot = self.robot
+            await self._first_cycle()
+        await self._server.start_serving()
         log.info("KUKAVARPROXY emulator listening on %s:%d", self.host, self.port)
         return self
+
+    async def _first_cycle(self) -> None:
+        """Wait for the robot's first IPO cycle: the first client, like one of a running KRC,
+        sees variables the robot program and the SPS have set (an SPS snapshot is readable),
+        however soon it connects (a script may start the emulator and read on its next line)."""
+        robot = self.robot
+        if robot is None:
+            return
+        clock, tick = robot.clock, robot.clock.callback
+        ticked = asyncio.Event()
+
+        def first() -> None:
+            clock.callback = tick
+            try:
+                tick()
+            finally:
+                ticked.set()
+
+        clock.callback = first
+        try:
+            # bounded: a clock held by a busy machine still lets the server start
+            await asyncio.wait_for(ticked.wait(), 10 * clock.period + 1.0)
+        except TimeoutError:
+            log.warning("serving before the robot's first IPO cycle (the machine is too busy)")
 
     def _start_robot(self) -> None:
         from .motion import Robot  # imported late: numpy kinematics only when a robot runs

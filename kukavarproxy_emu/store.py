@@ -39,6 +39,7 @@ from pyopenshowvar.krl import (
 
 from .datfile import DatFile, load_default_config, parse_dat
 from .names import Var, VarPath, parse_name
+from .slot import Slot
 from .sysvars import system_variables
 from .values import CHAR_LEN, Range, Refused, check, check_ranges, coerce, parse_text, rebuild
 
@@ -465,6 +466,23 @@ class VariableStore:
             return coerced
 
         self._assign(name, produce, bypass_read_only=True)
+
+    def slot(self, name: str) -> Slot | None:
+        """``name`` compiled for repeated access (:class:`~.slot.Slot`); None for what a slot
+        does not cover (see :meth:`Slot.compile`)."""
+        return Slot.compile(self, name)
+
+    def put_valid(self, name: str, value: KrlValue) -> None:
+        """Set ``name`` (any path) to ``value``, which is a valid value of its declared type
+        already (the KRL interpreter copying a structure from a variable of that very type):
+        like :meth:`set_system` without converting and re-checking it; declared limits are
+        still checked. Raises :class:`UnknownVariable` or :class:`WriteRefused`."""
+        if self.on_write is not None:
+            self.on_write()
+        path = parse_name(name)
+        if path is None or path.base not in self._vars:
+            raise UnknownVariable(name)
+        self._assign(name, lambda spec, type_name: value, bypass_read_only=True)
 
     def defer(self, names: Iterable[str], fill: Callable[[], None]) -> None:
         """Mark the variables ``names`` stale: the first :meth:`read` or :meth:`get` of any of

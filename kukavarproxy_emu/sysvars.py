@@ -5,8 +5,9 @@ parses its initial literal with the entry's type. The robot model updates the re
 motion variables later through ``VariableStore.set_system``; the values here are the state of
 a KR 6 R900 sixx standing at HOME (A1..A6 = 0, -90, 90, 0, 0, 0) on a KRC4 in ``#AUT``.
 
-Figures come from /work/shared/reference/kr6r900sixx.md (§2.2 variables, §3.1 limits,
-§3.3 holding torques, §1.5 HOME pose). Initial values can be replaced per name with
+Figures: the variables and their texts as captured from KRC4s in public clients, KUKA's KR AGILUS
+sixx limits (kroshu/kuka_robot_descriptions, ros-industrial/kuka_experimental), the holding
+torques of KUKA's KR 6 R900-2 masses at the HOME pose. Initial values can be replaced per name with
 ``system_variables(overrides)``, e.g. ``{"$MODE_OP": "#T1"}`` for a teach-mode controller.
 """
 

@@ -1,7 +1,8 @@
 """Sans-IO codec for the KUKAVARPROXY wire protocol, shared by the client and the emulator.
 
-No sockets and no asyncio here: bytes in, frames out. The layout follows
-``shared/reference/kukavarproxy-protocol.md`` §1–§2 (all integers unsigned 16-bit big-endian)::
+No sockets and no asyncio here: bytes in, frames out. The layout is the one the public
+KUKAVARPROXY 9.0 source builds and parses (ImtsSrl/KUKAVARPROXY: ``frmMain.frm``,
+``basMain.bas``; all integers unsigned 16-bit big-endian)::
 
     request  id:u16 | L:u16 | mode:u8 | N:u16 | name[N] | (write: M:u16 | value[M])
     reply    id:u16 | L:u16 | mode:u8 | V:u16 | value[V] | 00 01 | status:u8      (L = V + 6)

@@ -31,6 +31,7 @@ BENCH = Path(__file__).resolve().parents[1] / "bench"
         ("web_jog.py", "jog stop latency after release"),
         ("c3.py", "upload-to-motion"),
         ("snapshot.py", "20 variables: `read_snapshot`"),
+        ("snapshot_cpu.py", "CPU at rest, README's snapshot"),
         ("cell_cpu.py", "CPU per robot, 2 robots, moving"),
         ("sync_read_cost.py", "critical path"),
         ("ik.py", "solved, numeric batched"),

@@ -65,7 +65,7 @@ def test_connection_refused_exit_code() -> None:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]  # nothing listens once closed
-    res = run("--port", str(port), "read", "$OV_PRO")
+    res = run("--port", str(port), "-t", "0.3", "read", "$OV_PRO")  # asked again for 0.3 s
     assert res.exit_code == EXIT_CONNECTION
     assert f"127.0.0.1:{port}" in res.stderr and len(res.stderr.strip().splitlines()) == 1
 

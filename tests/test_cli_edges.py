@@ -111,6 +111,7 @@ def test_global_options_after_the_command(emulator_thread: Any) -> None:
         ["read", f"--port={port}", "$OV_PRO", "-t", "0.5"],
         ["--port", "1", "read", "$OV_PRO", f"-p{port}"],  # the later one wins
         ["read", "$OV_PRO", "--emulate"],
+        ["read", "$OV_PRO", "--emulate", "--plant", "ideal"],
     ):
         res = run(*args)
         assert res.exit_code == 0 and res.stdout.strip() == "100", (args, res.output)
@@ -198,8 +199,43 @@ def test_bench_checks_its_csv_before_running(tmp_path: Path) -> None:
     err = one_clean_error(run("-p", closed, "bench", "--csv", "/nonexistent/x.csv"), EXIT_USAGE)
     assert "cannot write /nonexistent/x.csv" in err
     out = tmp_path / "x.csv"  # a good path, then the benchmark fails: no empty file left
-    assert run("-p", closed, "bench", "--csv", str(out)).exit_code == EXIT_CONNECTION
+    assert run("-p", closed, "-t", "0.3", "bench", "--csv", str(out)).exit_code == EXIT_CONNECTION
     assert not out.exists()
+
+
+def test_a_proxy_still_starting_is_waited_for_until_the_timeout() -> None:
+    """An emulator started in the background a moment before refuses until it listens: the
+    command asks again (README: ``kukavarproxy-emu ... &`` then ``kvp read`` on the next line)."""
+    import subprocess
+    import threading
+    import time
+
+    port = free_port()
+    kvp = str(Path(sys.executable).with_name("kvp"))
+    started = time.monotonic()
+    proc = subprocess.Popen(
+        [kvp, "-p", str(port), "-t", "30", "read", "$OV_PRO"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    stop = threading.Event()
+
+    def late_emulator() -> None:
+        time.sleep(1.0)
+        with EmulatorThread(replace(TEST_CONFIG, port=port)):
+            stop.wait(60)
+
+    thread = threading.Thread(target=late_emulator)
+    thread.start()
+    try:
+        out, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+        stop.set()
+        thread.join()
+    assert proc.returncode == 0, err
+    assert out.strip() == "100" and time.monotonic() - started > 1.0
 
 
 def test_discover_the_embedded_emulator() -> None:

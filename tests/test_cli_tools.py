@@ -66,7 +66,7 @@ def test_watch_unknown_variable_exits_5(emulator_thread: Any) -> None:
 
 def test_watch_connection_refused_and_bad_rate() -> None:
     port = closed_port()
-    res = run("--port", str(port), "watch", "$OV_PRO", "--count", "1")
+    res = run("--port", str(port), "-t", "0.3", "watch", "$OV_PRO", "--count", "1")
     assert res.exit_code == EXIT_CONNECTION and f"127.0.0.1:{port}" in res.stderr
     assert run("watch", "$OV_PRO", "--hz", "0").exit_code == EXIT_USAGE
 

@@ -20,7 +20,7 @@ from pyopenshowvar_apps.common import (
     Opts,
     fail,
     fail_for,
-    make_client,
+    open_client,
 )
 
 if TYPE_CHECKING:
@@ -58,7 +58,7 @@ def run_c3(job: Callable[[Client], Awaitable[T]]) -> T:
     start_c3_emulator()
 
     async def main() -> T:
-        async with make_client() as kvp:
+        async with open_client() as kvp:
             return await job(kvp)
 
     try:

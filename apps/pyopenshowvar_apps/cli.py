@@ -69,7 +69,7 @@ __all__ = [
 ]
 
 #: The global options that take a value, and the global flags.
-GLOBAL_VALUED = frozenset({"-H", "--host", "-p", "--port", "-t", "--timeout"})
+GLOBAL_VALUED = frozenset({"-H", "--host", "-p", "--port", "-t", "--timeout", "--plant"})
 GLOBAL_FLAGS = frozenset({"--emulate"})
 
 
@@ -125,8 +125,8 @@ def hoist_global_options(
 
 
 GLOBAL_EPILOG = (
-    "Global options (-H/--host, -p/--port, -t/--timeout, --emulate) may come before or after "
-    "the command name; see kvp --help."
+    "Global options (-H/--host, -p/--port, -t/--timeout, --emulate, --plant) may come before or "
+    "after the command name; see kvp --help."
 )
 
 
@@ -217,7 +217,14 @@ def _global(
     ] = 7000,
     timeout: Annotated[
         float,
-        typer.Option("--timeout", "-t", callback=check_seconds, help="Seconds per request (> 0)."),
+        typer.Option(
+            "--timeout",
+            "-t",
+            envvar="KVP_TIMEOUT",
+            callback=check_seconds,
+            help="Seconds per request (> 0), and for connecting: a proxy that refuses is asked"
+            " again until then (one started a moment before is still loading).",
+        ),
     ] = 2.0,
     emulate: Annotated[
         bool,

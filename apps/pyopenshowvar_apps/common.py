@@ -20,8 +20,12 @@ This module must stay cheap to import: ``kvp read`` is on the hot path of shell 
 
 from __future__ import annotations
 
+import logging
 import math
-from collections.abc import Awaitable, Callable, Sequence
+import os
+import time
+from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
+from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn, TypeVar
 
@@ -60,6 +64,9 @@ STOP_WINDOW_HELP = (
     "Seconds to watch $PRO_STATE1/$STOPMESS for a program stop after a write (0: do not watch)."
 )
 
+#: Seconds between two attempts to connect to a proxy that refuses (see connect_blocking).
+CONNECT_RETRY = 0.1
+
 T = TypeVar("T")
 
 
@@ -79,6 +86,8 @@ class Opts:
     emulator: Any = None
     #: The embedded emulator's plant (``--plant``): "dynamic" or "ideal".
     plant = "dynamic"
+    #: Undoes the quieter log of the embedded emulator (see ``_quiet_emulator_log``).
+    log_restore: Callable[[], None] | None = None
 
     @classmethod
     def reset(cls, host: str, port: int, timeout: float, emulate: bool) -> None:
@@ -159,11 +168,46 @@ def start_embedded_emulator(
         plant=Opts.plant,
         **extra,
     )
+    _quiet_emulator_log()
     Opts.emulator = EmulatorThread(config).start()
     Opts.host, Opts.port = "127.0.0.1", Opts.emulator.port
     if ctx is not None:
         ctx.find_root().call_on_close(stop_embedded_emulator)
     return Opts.emulator
+
+
+class _EmulatorErrors(logging.Handler):
+    """The embedded emulator's errors on stderr as ``kvp: emulator: ...`` lines."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.ERROR)
+
+    def emit(self, record: logging.LogRecord) -> None:
+        typer.echo(f"kvp: emulator: {record.getMessage()}", err=True)
+
+
+def _quiet_emulator_log() -> None:
+    """Show only the embedded emulator's errors (all of its log with ``KVP_DEBUG=1``), until
+    :func:`stop_embedded_emulator`.
+
+    It stands in for the robot, and a robot prints nothing on your terminal: the commands
+    report what it does themselves (``kvp write`` says that the program stopped and why), so
+    its own warnings only said the same twice (the stop message), and would break the
+    monitor's screen. What it would warn about stays readable: ``$PRO_STATE1``, ``$STOPMESS``,
+    ``$EMU_MESSAGE[]``.
+    """
+    logger = logging.getLogger("kukavarproxy_emu")
+    if os.environ.get("KVP_DEBUG") or any(isinstance(h, _EmulatorErrors) for h in logger.handlers):
+        return
+    handler, propagate = _EmulatorErrors(), logger.propagate
+    logger.addHandler(handler)
+    logger.propagate = False
+
+    def restore() -> None:  # the CLI also runs in-process (tests): leave logging as it was
+        logger.removeHandler(handler)
+        logger.propagate = propagate
+
+    Opts.log_restore = restore
 
 
 def stop_embedded_emulator() -> None:
@@ -176,6 +220,9 @@ def stop_embedded_emulator() -> None:
     thread, Opts.emulator = Opts.emulator, None
     if thread is not None:
         thread.stop()
+    restore, Opts.log_restore = Opts.log_restore, None
+    if restore is not None:
+        restore()
 
 
 def fail(code: int, message: str) -> NoReturn:
@@ -216,11 +263,56 @@ def make_client(**kw: Any) -> Client:
     return Client(host, port, timeout=Opts.timeout, **kw)
 
 
+def _refused(exc: KvpConnectionError) -> bool:
+    return isinstance(exc.__cause__, ConnectionRefusedError)
+
+
+@asynccontextmanager
+async def open_client(**kw: Any) -> AsyncIterator[Client]:
+    """:func:`make_client`, connected: a proxy that refuses the connection is asked again
+    every ``CONNECT_RETRY`` seconds until ``--timeout`` (see :func:`connect_blocking`)."""
+    import asyncio
+
+    client = make_client(**kw)
+    deadline = time.monotonic() + Opts.timeout
+    try:
+        while True:
+            try:
+                await client.connect()
+                break
+            except KvpConnectionError as exc:
+                if not _refused(exc) or time.monotonic() + CONNECT_RETRY > deadline:
+                    raise
+            await asyncio.sleep(CONNECT_RETRY)
+        yield client
+    finally:
+        await client.close()
+
+
+def connect_blocking(client: sync.Client) -> None:
+    """Connect ``client``, asking a proxy that refuses again until ``--timeout``.
+
+    A refused connection is an answer, but often a passing one: an emulator started in the
+    background a moment before (``kukavarproxy-emu ... &`` and then ``kvp read`` on the next
+    line of a script) refuses until it has loaded, which takes about a second. Other failures
+    (no route, a timeout) are reported at once.
+    """
+    deadline = time.monotonic() + Opts.timeout
+    while True:
+        try:
+            client.connect()
+            return
+        except KvpConnectionError as exc:
+            if not _refused(exc) or time.monotonic() + CONNECT_RETRY > deadline:
+                raise
+        time.sleep(CONNECT_RETRY)
+
+
 def run(job: Callable[[Client], Awaitable[T]], **client_kw: Any) -> T:
     """Run ``job`` with a connected client; every library error becomes one line + exit code."""
 
     async def main() -> T:
-        async with make_client(**client_kw) as kvp:
+        async with open_client(**client_kw) as kvp:
             return await job(kvp)
 
     import asyncio  # not at module level: kvp read runs without it (run_blocking)
@@ -241,7 +333,9 @@ def run_blocking(job: Callable[[sync.Client], T]) -> T:
 
     host, port = Opts.endpoint()
     try:
-        with sync.Client(host, port, timeout=Opts.timeout, keepalive=None) as kvp:
+        kvp = sync.Client(host, port, timeout=Opts.timeout, keepalive=None)
+        connect_blocking(kvp)
+        with kvp:
             return job(kvp)
     except KvpError as exc:
         fail_for(exc)

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from pyopenshowvar import KvpConnectionError, KvpError, KvpTimeoutError
-from pyopenshowvar_apps.common import EXIT_USAGE, fail, fail_for, flatten, make_client
+from pyopenshowvar_apps.common import EXIT_USAGE, fail, fail_for, flatten, open_client
 
 if TYPE_CHECKING:
     from rich.table import Table
@@ -94,7 +94,7 @@ def watch(
     console = Console()
 
     async def main() -> None:
-        async with make_client(auto_reconnect=True) as kvp:
+        async with open_client(auto_reconnect=True) as kvp:
             values: dict[str, str] = {}
             rtt: dict[str, float] = {}
             t0 = time.perf_counter()
@@ -160,7 +160,7 @@ def record(
     stats = {"rows": 0, "missed": 0}
 
     async def main() -> None:
-        async with make_client(auto_reconnect=True) as kvp:
+        async with open_client(auto_reconnect=True) as kvp:
             first = await _first_poll(kvp, names, split)
             extra: list[str] = []
             if split:

@@ -44,6 +44,7 @@ __all__ = [
     "ProgramState",
     "RefusedWrite",
     "WriteOutcome",
+    "WriteProgress",
     "check_literal",
     "checked_write",
     "explain_refusal",
@@ -239,33 +240,80 @@ async def read_program_state(client: Client) -> ProgramState:
 
 @dataclass(frozen=True)
 class WriteOutcome:
-    """A write the controller accepted: its echo, and the program stop it caused, if any."""
+    """A write the controller accepted: its echo, the write request's round trip (seconds;
+    not the stop window after it), and the program stop it caused, if any."""
 
     echo: str
+    seconds: float
     stop: ProgramState | None = None
 
 
+class WriteProgress:
+    """How far a :func:`checked_write` got, for a caller that was interrupted (Ctrl-C).
+
+    ``sent``: the write request was handed to the connection (it may have reached the
+    controller even if no answer came); ``answer``: ``"acknowledged"`` or ``"refused"`` once
+    the proxy answered; ``echo``: its echo of an acknowledged write.
+    """
+
+    def __init__(self) -> None:
+        self.sent = False
+        self.answer: str | None = None
+        self.echo = ""
+
+    def describe(self, name: str) -> str:
+        """What an interruption now means for the variable, in one clause."""
+        if self.answer == "acknowledged":
+            return (
+                f"the write was sent and acknowledged: {name!r} = {self.echo} was written"
+                " (the robot program was no longer watched for a stop)"
+            )
+        if self.answer == "refused":
+            return f"the write was sent and refused: {name!r} was not written"
+        if self.sent:
+            return (
+                f"the write was sent but not answered: {name!r} may or may not have been"
+                " written (read it to know)"
+            )
+        return f"the write was not sent: {name!r} was not written"
+
+
 async def checked_write(
-    client: Client, name: str, value: str, *, window: float = STOP_WINDOW
+    client: Client,
+    name: str,
+    value: str,
+    *,
+    window: float = STOP_WINDOW,
+    progress: WriteProgress | None = None,
 ) -> WriteOutcome:
     """Write ``value`` (KRL text) to ``name`` and watch ``window`` seconds for a program stop.
 
     A refusal raises :class:`WriteRefusedError` whose message says the likely reason.
-    ``window=0`` writes without watching.
+    ``window=0`` writes without watching. ``progress`` (optional) is kept up to date, so a
+    caller interrupted meanwhile can say whether the write was sent and answered.
     """
+    progress = progress if progress is not None else WriteProgress()
     before = await read_program_state(client) if window > 0 else None
+    # On an open connection the request goes to the socket before the call first awaits
+    # anything, so from here an interruption cannot come before it was sent; on a lost one
+    # the client reconnects first, and an interruption then means "not sent".
+    progress.sent = client.connected
+    t0 = time.perf_counter()
     try:
         echo = await client.write(name, value)
     except WriteRefusedError as exc:
+        progress.sent, progress.answer = True, "refused"
         reason = await explain_refusal(client, name, value)
         raise RefusedWrite(name, exc.endpoint, value, reason) from None
+    seconds = time.perf_counter() - t0
+    progress.sent, progress.answer, progress.echo = True, "acknowledged", echo
     if before is None or not before.running:
-        return WriteOutcome(echo)
+        return WriteOutcome(echo, seconds)
     deadline = time.monotonic() + window
     while True:
         now = await read_program_state(client)
         if now.stopped_since(before):
-            return WriteOutcome(echo, now)
+            return WriteOutcome(echo, seconds, now)
         if time.monotonic() >= deadline:
-            return WriteOutcome(echo)
+            return WriteOutcome(echo, seconds)
         await asyncio.sleep(STOP_POLL)

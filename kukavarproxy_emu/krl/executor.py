@@ -54,6 +54,10 @@ SHIPPED = {
     "sps": "sps.sub",
 }
 _MESSAGE = 128
+#: Statements of a "light" SPS pass: one the robot's IPO clock may run late, batched with
+#: others, while the robot rests (see Robot.tick); an SPS snapshot of a few dozen variables is
+#: one, a pass computing for its whole budget is not.
+LIGHT_PASS = 64
 
 
 def shipped_path(name: str) -> Path:
@@ -172,6 +176,8 @@ class KrlSubmit:
         self.running = False
         #: The message that stopped the SPS ("" while it runs).
         self.message = ""
+        #: The last cycle was one whole, short pass (see :attr:`light`).
+        self.light = False
 
     def start(self) -> None:
         """(Re)start the submit program from its first statement."""
@@ -183,6 +189,7 @@ class KrlSubmit:
 
     def step(self) -> None:
         """One interpolation cycle of the submit interpreter."""
+        self.light = False
         if not self.running:
             return
         self.interp.sim_time += self.ipo
@@ -197,6 +204,9 @@ class KrlSubmit:
             return
         if self.interp.finished or self.interp.halted:
             self._stop("", "P_END" if self.interp.finished else "P_STOP")
+            return
+        interp = self.interp
+        self.light = interp.whole_pass and interp.count <= LIGHT_PASS
 
     def _stop(self, message: str, state: str) -> None:
         self.running = False

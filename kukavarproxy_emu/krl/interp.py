@@ -45,6 +45,7 @@ from . import ast
 from .interp_expr import ExprMixin
 from .interp_motion import BUDGET, WAIT, MotionMixin
 from .interp_skip import PASS, SkipMixin
+from .plan import AssignPlan
 from .runtime import (
     ACTUAL_POSITION,
     HEAVY_ELEMENTS,
@@ -135,6 +136,8 @@ class Interpreter(SkipMixin, ExprMixin, MotionMixin):
         self._reads: dict[int, bool] = {}
         self._init_skip()
         self._user_calls: dict[int, bool] = {}
+        #: Compiled assignments per statement node (None: not one of the simple forms).
+        self._plans: dict[int, AssignPlan | None] = {}
         self._local_sizes: dict[int, int] = {}
         #: Elements of the locals of the routines on the call stack now.
         self.local_elements = 0
@@ -339,10 +342,40 @@ class Interpreter(SkipMixin, ExprMixin, MotionMixin):
     # --- statements ----------------------------------------------------------------------------
     def _block(self, body: tuple[ast.Stmt, ...]) -> Gen:
         for stmt in body:
+            if type(stmt) is ast.Assign and self._planned(stmt):
+                continue
             signal = yield from self._stmt(stmt)
             if signal is not None:
                 return signal
         return None
+
+    def _planned(self, stmt: ast.Assign) -> bool:
+        """Run ``stmt`` by its compiled plan (:mod:`.plan`): True when it did.
+
+        False — run it the general way — when it has none, when this statement is where the
+        cycle's budget must be looked at (the general way yields there), or when the plan
+        does not apply now. Counted like any statement.
+        """
+        key = id(stmt)
+        if key in self._plans:
+            plan = self._plans[key]
+        else:
+            plain = self.kernel is None or not (
+                self._reads_actual(stmt.target) or self._reads_actual(stmt.value)
+            )  # a read of $AXIS_ACT & co. in the robot program stops the advance run first
+            plan = self._plans[key] = AssignPlan.compile(self.ev, stmt) if plain else None
+        if plan is None:
+            return False
+        count = self.count + 1
+        if count > self.budget or count >= self._check_at or self.ev.heavy:
+            return False
+        if not plan.run():
+            if plan.stale():
+                del self._plans[key]  # a variable was declared anew: compile it again
+            return False
+        self.count = count
+        self.total += 1
+        return True
 
     def _stmt(self, stmt: ast.Stmt) -> Gen:
         yield from self._tick()

@@ -47,6 +47,9 @@ class SkipMixin:
         self._pass_loop: int | None = None
         #: Cycles skipped because they would have done exactly what the previous one did.
         self.skipped = 0
+        #: The last cycle ran from the repeating point back to it (one whole SPS pass, or a
+        #: motion completed at once), or was skipped as a repeat of such a cycle.
+        self.whole_pass = False
 
     def _reset_skip(self) -> None:
         self._quiet = self._at_pass = None
@@ -79,6 +82,7 @@ class SkipMixin:
                 store.version(base) == version for store, base, version in quiet
             ):
                 self.skipped += 1
+                self.whole_pass = True
                 return
             self._quiet = None
         start = self._at_pass
@@ -92,6 +96,7 @@ class SkipMixin:
         finally:
             self.ev.reads = None
         self._at_pass = self._pass_loop if reason in (PASS, AT_ONCE) else None
+        self.whole_pass = start is not None and start == self._at_pass
         if (
             start is not None
             and start == self._at_pass

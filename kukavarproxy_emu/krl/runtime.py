@@ -40,6 +40,8 @@ __all__ = [
     "Evaluator",
     "Frame",
     "KrlRuntimeError",
+    "convert",
+    "literal_path",
     "render",
 ]
 
@@ -180,6 +182,13 @@ class Evaluator:
         self.heavy = False
         #: While not None, every variable read is recorded here as (store, base name).
         self.reads: set[tuple[VariableStore, str]] | None = None
+        #: :meth:`ref` of lvalues whose indices are literals (``CELL_W.TORQUE_1``,
+        #: ``$TORQUE_AXIS_ACT[3]``), per node: (declaration, store, text, base). An SPS copies
+        #: the same variables every cycle; this spares building and bounds-checking their text.
+        self._refs: dict[int, tuple[Var, VariableStore, str, ast.Name]] = {}
+        #: The value the last variable read returned, and its store (see :meth:`put`).
+        self._read: object = None
+        self._read_store: VariableStore | None = None
 
     # --- references ----------------------------------------------------------------------------
     def scope(self, name: str, node: ast.Node) -> VariableStore:
@@ -202,11 +211,26 @@ class Evaluator:
         """(store, full variable text such as ``A[3].X``, base name node) of an lvalue."""
         if isinstance(expr, ast.Name):
             return self.scope(expr.name, expr), expr.name, expr
+        cached = self._refs.get(id(expr))
+        if cached is not None:
+            var, store, text, base = cached
+            # the same scope and declaration as when it was cached: same text, same bounds
+            if self.scope(base.name, base) is store and store.declaration(base.name) is var:
+                return store, text, base
+        store, text, base = self._ref(expr)
+        declared = store.declaration(base.name)
+        if declared is not None and literal_path(expr):
+            self._refs[id(expr)] = (declared, store, text, base)
+        return store, text, base
+
+    def _ref(self, expr: ast.Expr) -> tuple[VariableStore, str, ast.Name]:
+        if isinstance(expr, ast.Name):
+            return self.scope(expr.name, expr), expr.name, expr
         if isinstance(expr, ast.Member):
-            store, text, base = self.ref(expr.base)
+            store, text, base = self._ref(expr.base)
             return store, f"{text}.{expr.member}", base
         if isinstance(expr, ast.Index):
-            store, text, base = self.ref(expr.base)
+            store, text, base = self._ref(expr.base)
             if not expr.indices:  # NAME[]: a whole CHAR array (the store refuses others)
                 return store, f"{text}[]", base
             idx = [self._index(i) for i in expr.indices]
@@ -255,6 +279,7 @@ class Evaluator:
                 raise KrlRuntimeError(f"{text} is not initialised", expr) from None
             if isinstance(value, list) and len(value) >= HEAVY_ELEMENTS:
                 self.heavy = True
+            self._read, self._read_store = value, store
             return value
         if isinstance(expr, ast.EnumLit):
             return KrlEnum._from_parsed(expr.name)
@@ -359,8 +384,15 @@ class Evaluator:
         if store is self.store and base not in KRL_WRITABLE and store.is_read_only(base):
             raise KrlRuntimeError(f"{base} is write-protected", node)
         var = _var(store, base)
+        valid = False
         if var is not None:
-            value = self._convert(value, var, store, text, node)
+            value, type_name = self._convert(value, var, store, text, node)
+            # A structure just read from a variable of the very type of the target (an SPS
+            # copying $AXIS_ACT into an E6AXIS member, a snapshot copied whole) is a valid
+            # value of that type already: the store need not convert and check it again.
+            # (The same store: a routine's locals may declare a STRUC of their own.)
+            valid = isinstance(value, Struct) and value is self._read
+            valid = valid and store is self._read_store and value.type_name == type_name  # type: ignore[union-attr]
         if self.reads is not None:
             self.reads.add((store, base))
         try:
@@ -369,7 +401,10 @@ class Evaluator:
         except (UnknownVariable, WriteRefused):
             pass
         try:
-            store.set_system(text, value)
+            if valid:
+                store.put_valid(text, value)
+            else:
+                store.set_system(text, value)
         except (UnknownVariable, WriteRefused) as exc:
             reason = exc.reason if isinstance(exc, WriteRefused) else "no such variable"
             raise KrlRuntimeError(f"{text} = {_short(value)}: {reason}", node) from None
@@ -377,15 +412,17 @@ class Evaluator:
     @staticmethod
     def _convert(
         value: KrlValue, var: Var, store: VariableStore, text: str, node: ast.Node
-    ) -> KrlValue:
+    ) -> tuple[KrlValue, str | None]:
+        """``value`` converted to the declared type at ``text``, and that type's name (None
+        when the store is left to judge: a CHAR of a text, an unknown member)."""
         members = tuple(m for m in text.partition(".")[2].split(".") if m)
         if var.text_len and "[" in text and not members:
-            return value  # one character of a CHAR array: the store checks it
+            return value, None  # one character of a CHAR array: the store checks it
         try:
             spec, type_name = var.chain(store.registry, members)[-1]
         except Exception:  # an unknown member: let the store word the refusal
-            return value
-        return convert(value, spec, type_name, store.registry, node)
+            return value, None
+        return convert(value, spec, type_name, store.registry, node), type_name
 
 
 def convert(
@@ -432,6 +469,17 @@ def convert(
                 members[name] = convert(member, mspec, mtype, registry, node)
             return Struct(None, members)
     raise KrlRuntimeError(f"type mismatch: cannot assign {_type_of(value)} to {type_name}", node)
+
+
+def literal_path(expr: ast.Expr) -> bool:
+    """An lvalue whose text never changes: names, members, literal indices (``NAME[]`` too)."""
+    if isinstance(expr, ast.Name):
+        return True
+    if isinstance(expr, ast.Member):
+        return literal_path(expr.base)
+    if isinstance(expr, ast.Index):
+        return all(isinstance(i, ast.IntLit) for i in expr.indices) and literal_path(expr.base)
+    return False
 
 
 def _is_lvalue(expr: ast.Expr) -> bool:

@@ -143,21 +143,39 @@ class Robot:
                     self.program.step(self.kernel)
                 except MotionRefused as exc:
                     self.fault(str(exc))
+            sps_changes = 0
             if self.sps is not None:
+                before = store.mutations - store.stale_marks
                 self.sps.step()
+                if self._light_sps():  # its writes do not keep the clock awake (see below)
+                    sps_changes = store.mutations - store.stale_marks - before
             self.kernel.tick()
             # the texts clients poll every cycle, formatted here rather than in their replies
             store.warm()
         finally:
             self._ticking = False
+        # Quiet: nothing wall time could show changed, so the clock may coast (run the next
+        # ticks late, batched, or when someone looks). The kernel and the plant rest, the robot
+        # program's pass was skipped as a repeat, and nothing else was written, but for a
+        # light SPS pass: one short pass (an SPS snapshot copying the readings, its counter
+        # counting) changes variables every cycle and is still cheap to run late, and whoever
+        # reads them brings the clock up to date first.
         plant = self.plant
+        now = self._skips()
         self._quiet = (
-            store.mutations - store.stale_marks == changes
+            store.mutations - store.stale_marks - sps_changes == changes
             and self.kernel.at_rest
             and (plant is None or plant.resting)
             and skips is not None
-            and self._skips() == (skips[0] + skips[2], skips[1] + skips[3], skips[2], skips[3])
+            and now is not None
+            and now[0] == skips[0] + skips[2]
+            and (now[1] == skips[1] + skips[3] or self._light_sps())
         )
+
+    def _light_sps(self) -> bool:
+        """The SPS made a light pass and may let the clock coast (see :meth:`tick`); not with
+        a latency profile (a clock gate): a coast's catch-up would make a reply late."""
+        return self.sps is not None and self.sps.light and self.clock.gate is None
 
     def _skips(self) -> tuple[int, int, int, int] | None:
         """The KRL passes skipped as exact repeats so far (program, SPS) and how many a quiet

@@ -2,7 +2,9 @@
 
 The thesis architecture defines a robot by its D-H table and joints, with interchangeable
 solvers on top; :class:`RobotModel` is that definition. The KR 6 R900 sixx is built in
-(:data:`KR6R900SIXX`, values from ``shared/reference/kr6r900sixx.md`` §1.3, §3.1, §3.3); any other
+(:data:`KR6R900SIXX`: KUKA's link lengths and KR AGILUS sixx limits and speeds from the public
+URDFs of kroshu/kuka_robot_descriptions and ros-industrial/kuka_experimental, masses from KUKA's
+KR 6 R900-2 URDF); any other
 arm is loaded from TOML or JSON with :meth:`RobotModel.from_file` (schema in docs/kinematics.md).
 
 Conventions (all at the API: millimetres, degrees, kilograms):

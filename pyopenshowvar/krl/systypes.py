@@ -5,8 +5,8 @@ or a BOOL-less counter, ``#AUT`` names no ENUM type, an array's length is not in
 reply). Generating KRL that copies a variable (:mod:`pyopenshowvar.snapshot`) needs the
 declared type, so this table holds it for the system variables of KSS 8.x on a KRC4:
 element type and dimensions for arrays (``"REAL[12]"``: ``$TORQUE_AXIS_ACT[1..12]``, axes
-7..12 being E1..E6). Sources: the KSS 8 system variable descriptions summarised in
-/work/shared/reference/kr6r900sixx.md §2.2 and the KRL quick guide; a test checks that the
+7..12 being E1..E6). Sources: KUKA's KSS 8 system variable descriptions, as texts captured from
+KRC4s in public clients show them, and the KRL quick guide; a test checks that the
 emulator declares every name it shares with this table with the same type.
 
 User globals are not here: give their type where you use them (``("MYPOS", "POS")``).

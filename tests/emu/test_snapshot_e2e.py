@@ -138,3 +138,15 @@ def test_kvp_snapshot_krl_and_read(emu: EmulatorThread, tmp_path: Path) -> None:
     assert lines[0].startswith("CYCLE ") and lines[1].startswith("$AXIS_ACT {E6AXIS: A1")
     torques = next(line for line in lines if line.startswith("$TORQUE_AXIS_ACT[] "))
     assert len(torques.split()) == 13  # the name and twelve values
+
+
+async def test_a_snapshot_is_readable_by_the_first_client_however_soon(tmp_path: Path) -> None:
+    """The emulator serves only once its first IPO cycle ran, as a running KRC: a script that
+    starts it and reads at once gets a filled snapshot, not "not readable"."""
+    from kukavarproxy_emu import Emulator
+
+    dat, sub = ONE.write_krl(tmp_path)
+    config = replace(TEST_CONFIG, config_files=(dat,), sps=str(sub))
+    async with Emulator(config) as emu, Client("127.0.0.1", emu.port, keepalive=None) as kvp:
+        reading = await kvp.read_snapshot(ONE)
+    assert reading.cycle >= 1

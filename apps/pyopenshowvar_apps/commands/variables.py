@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from pyopenshowvar_apps.common import (
+    EXIT_INTERRUPTED,
     EXIT_STOPPED,
     EXIT_USAGE,
     STOP_WINDOW,
@@ -68,12 +69,19 @@ def write(
     The literal is checked before it is sent; a refusal says its likely reason; a write that
     stops the running robot program (e.g. beyond a software limit) is reported, exit code 7.
     """
-    from pyopenshowvar_apps.writecheck import check_literal, checked_write
+    from pyopenshowvar_apps.writecheck import WriteProgress, check_literal, checked_write
 
     if not no_check and (problem := check_literal(value)) is not None:
         lines = problem.lines(value)
         fail(EXIT_USAGE, "\n".join([f"{value!r} is not a KRL literal: {lines[0]}", *lines[1:]]))
-    outcome = run(lambda kvp: checked_write(kvp, name, value, window=stop_window))
+    progress = WriteProgress()
+    try:
+        outcome = run(
+            lambda kvp: checked_write(kvp, name, value, window=stop_window, progress=progress)
+        )
+    except KeyboardInterrupt:
+        # Ctrl-C: the one thing the user must know now is whether the variable changed
+        fail(EXIT_INTERRUPTED, f"interrupted: {progress.describe(name)} on {Opts.where()}")
     typer.echo(outcome.echo)
     if outcome.stop is not None:
         fail(

@@ -22,6 +22,7 @@ from typing import ClassVar
 
 from rich.console import RenderableType
 from rich.text import Text
+from textual import events
 from textual.app import App, ComposeResult
 from textual.binding import Binding, BindingType
 from textual.containers import Horizontal, Vertical
@@ -134,6 +135,15 @@ class MonitorApp(App[None]):
         if self._task is not None:
             self._task.cancel()
         await self.client.close()
+
+    async def on_event(self, event: events.Event) -> None:
+        # Keys pressed right after ``a`` or ``e`` went to the watch table before the binding
+        # opened the dialog; they come back here unhandled: they belong to the dialog.
+        if isinstance(event, events.Key) and event.is_forwarded:
+            screen = self.screen_stack[-1] if self.screen_stack else None
+            if isinstance(screen, InputDialog) and screen.type_ahead(event):
+                return
+        await super().on_event(event)
 
     # ------------------------------------------------------------------ polling
     async def _poll_loop(self) -> None:

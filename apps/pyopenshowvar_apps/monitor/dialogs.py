@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
+from textual import events
 from textual.app import ComposeResult
 from textual.binding import Binding, BindingType
 from textual.containers import Horizontal, Vertical
@@ -33,12 +34,74 @@ class InputDialog(ModalScreen[str | None]):
         self.prompt = prompt
         self.value = value
         self.placeholder = placeholder
+        #: Keys were typed ahead into the value (see :meth:`type_ahead`).
+        self._typed = False
+        #: Enter (True) or Escape (False) typed ahead before the dialog was mounted.
+        self._answered: bool | None = None
 
     def compose(self) -> ComposeResult:
         with Vertical(id="dialog"):
             yield Label(self.prompt)
-            yield Input(self.value, placeholder=self.placeholder, id="answer")
+            yield Input(
+                self.value,
+                placeholder=self.placeholder,
+                id="answer",
+                # a value typed ahead must not be selected when the focus arrives: the next
+                # key would replace it
+                select_on_focus=not self._typed,
+            )
             yield Label("Enter: OK   Esc: cancel", classes="hint")
+
+    def on_mount(self) -> None:
+        if self._answered is not None:
+            self._finish(self._answered)
+
+    def type_ahead(self, event: events.Key) -> bool:
+        """Type a key that was pressed before the input had the focus into it; False when it
+        is not a key of a one-line input (left for the bindings).
+
+        A fast typist presses ``e``, the value and Enter at once: the monitor handles ``e``
+        only once the keys after it have gone to the watch table, and the dialog's input
+        exists only once it is mounted. Those keys were lost (and a ``1`` among them switched
+        the tab) until they were typed here, as the focused input would: the first character
+        replaces the value shown (the input selects it when it gets the focus), Backspace
+        deletes, Enter answers, Escape cancels.
+        """
+        answer = self.query("#answer").first(Input) if self.is_mounted else None
+        text = answer.value if answer is not None else self.value
+        if event.key in ("enter", "escape"):
+            if answer is None:
+                self._answered = event.key == "enter"  # answered once it is mounted
+            else:
+                self._finish(event.key == "enter")
+            return True
+        if event.key == "backspace":
+            text = text[:-1]
+        elif event.is_printable and event.character:
+            text = (text if self._typed else "") + event.character
+        else:
+            return False
+        self._typed = True
+        if answer is None:
+            self.value = text
+        else:
+            answer.select_on_focus = False
+            answer.value = text
+            answer.cursor_position = len(text)
+        return True
+
+    def on_key(self, event: events.Key) -> None:
+        # keys that reach the screen itself arrived while nothing had the focus
+        if self.focused is None and self.type_ahead(event):
+            event.stop()
+            event.prevent_default()
+
+    def _finish(self, ok: bool) -> None:
+        if not ok:
+            self.dismiss(None)
+            return
+        answer = self.query("#answer").first(Input)
+        self.dismiss(answer.value.strip() or None)
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
         self.dismiss(event.value.strip() or None)

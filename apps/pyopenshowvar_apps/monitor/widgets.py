@@ -2,7 +2,7 @@
 
 Each panel is a :class:`~textual.widgets.Static` re-rendered from :class:`RobotState` on every
 refresh; ``plain`` keeps the last text shown, for tests and screen readers. The plots are
-Textual's own :class:`~textual.widgets.Sparkline` (no extra dependency), one line per axis.
+:class:`~.plot.Plot` sparklines, one per axis, that draw noise at rest flat.
 """
 
 from __future__ import annotations
@@ -19,9 +19,13 @@ from textual.widgets import Label, Sparkline, Static
 
 from pyopenshowvar import AccessStats
 
+from .plot import Plot
 from .state import AXES, RobotState
 
 BAR_WIDTH = 11
+#: The smallest change the history plots draw: the precision the panels print (each plot also
+#: draws its sensor's noise flat, see :mod:`.plot`).
+RESOLUTION = {"joints": 0.01, "torques": 0.1}
 
 
 def limit_bar(
@@ -132,7 +136,7 @@ class PlotsPanel(Widget):
     PlotsPanel .plot-group { height: auto; }
     PlotsPanel .plot-row { height: 1; }
     PlotsPanel .plot-label { width: 22; }
-    PlotsPanel Sparkline { width: 1fr; height: 1fr; }
+    PlotsPanel Plot { width: 1fr; height: 1fr; }
     PlotsPanel .plot-title { text-style: bold; color: $accent; height: 1; }
     """
 
@@ -149,13 +153,13 @@ class PlotsPanel(Widget):
                 for axis in AXES:
                     with Horizontal(classes="plot-row"):
                         yield Label(axis, id=f"{kind}-{axis}-label", classes="plot-label")
-                        yield Sparkline([], id=f"{kind}-{axis}")
+                        yield Plot(resolution=RESOLUTION[kind], id=f"{kind}-{axis}")
 
     def refresh_from(self, state: RobotState) -> None:
         for kind, history in (("joints", state.joint_history), ("torques", state.torque_history)):
             for axis, samples in zip(AXES, history, strict=True):
                 data = [x for x in samples if not math.isnan(x)]
-                spark = self.query_one(f"#{kind}-{axis}", Sparkline)
+                spark = self.query_one(f"#{kind}-{axis}", Plot)
                 spark.data = data or [0.0]
                 last = data[-1] if data else math.nan
                 lo = min(data) if data else math.nan
