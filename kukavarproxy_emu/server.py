@@ -529,7 +529,7 @@ class Emulator:
         self._server: asyncio.Server | None = None
         self._connections: dict[int, _Connection | Kvp9Connection] = {}
         #: Connections with requests left to answer, served in rounds (see ROUND).
-        self._ready: deque[_Connection] = deque()
+        self._ready: deque[_Connection | Kvp9Connection] = deque()
         self._round_pending = False
         self._last_index = 0
         self._idle_task: asyncio.Task[None] | None = None
@@ -717,7 +717,7 @@ class Emulator:
         self.stats.clients = len(self._connections)
         return True
 
-    def _enqueue(self, conn: _Connection) -> None:
+    def _enqueue(self, conn: _Connection | Kvp9Connection) -> None:
         """Serve ``conn``'s backlog in the next round (once per round, in arrival order)."""
         if conn._scheduled:
             return

@@ -264,3 +264,87 @@ def test_wire_option_and_config_checks() -> None:
         EmulatorConfig(wire="c3")
     with pytest.raises(ValueError, match="strict"):
         EmulatorConfig(wire="kvp9", strict=True)
+
+
+# --- the same work budget as the robust mode ---------------------------------------------------
+
+
+@pytest.mark.parametrize("path", ["fast", "worker"])
+async def test_a_long_read_is_served_in_slices_between_other_clients(
+    emulator_factory: EmulatorFactory, monkeypatch: pytest.MonkeyPatch, path: str
+) -> None:
+    """170 reads of the 24 KB $IN[] in one 2048-byte read (~4 MB of replies) are answered in
+    slices: a bystander's read sent right after it is answered before the long read ends.
+    Both paths: parked on the fast path, yielding in the worker (faults armed, no latency)."""
+    from kukavarproxy_emu import kvp9_connection
+
+    faults = (Fault("drop", nth=10**9),) if path == "worker" else ()
+    emu = await kvp9(emulator_factory, faults=faults)
+    writes: list[int] = []
+    original = kvp9_connection.Kvp9Connection.write
+
+    def logged(self: kvp9_connection.Kvp9Connection, data: bytes) -> None:
+        writes.append(self.index)
+        original(self, data)
+
+    monkeypatch.setattr(kvp9_connection.Kvp9Connection, "write", logged)
+    burst = b"".join(encode_read(i, "$IN[]") for i in range(170))
+    async with (
+        await RawClient.connect(emu.host, emu.port) as flood,
+        await RawClient.connect(emu.host, emu.port) as bystander,
+    ):
+        assert (await bystander.request(encode_read(1, "PING")))[:2] == H("0001")
+        flood_index, by_index = sorted(emu._connections)
+        writes.clear()
+        flood.writer.write(burst)
+        first = await flood.reader.readexactly(10)  # the long read is being answered
+        sink = asyncio.create_task(flood.reader.readexactly(170 * (24575 + 10) - 10))
+        assert (await bystander.request(encode_read(2, "PING"), timeout=10))[:2] == H("0002")
+        await asyncio.wait_for(sink, 30)
+    assert first[:2] == H("0000") and writes[0] == flood_index
+    # the long read's replies went on after the bystander's: it was served in slices (in one
+    # go, all of them would precede the bystander's, whose request came after the first)
+    assert flood_index in writes[writes.index(by_index) :]
+
+
+async def test_a_read_paused_at_every_step_answers_the_same_bytes(
+    emulator_factory: EmulatorFactory, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """VB's walk resumes exactly where it paused: with a budget of 0 (one step per slice) a
+    read of mixed, cut and malformed requests gets byte for byte the one-go answer."""
+    from kukavarproxy_emu import kvp9_connection, server
+
+    chunk = (
+        encode_read(1, "$OV_PRO")
+        + encode_write(2, "$OV_PRO", "55")
+        + H("0003 000A 07 0007") + b"$OV_PRO"  # unknown mode: the previous reply nested
+        + encode_read(4, "$TORQUE_AXIS_ACT[]")
+        + H("0005 000C 00 0007") + b"$OV_PRO" + H("0000")  # L two bytes too large
+        + H("0006 0009 02 0006") + b"$IN[1]"  # mode 2 of one token
+        + encode_read(7, "$OV_PRO")[:9]  # cut: the read ends in errRead
+    )  # fmt: skip
+
+    async def answer(emu: Emulator) -> bytes:
+        async with await RawClient.connect(emu.host, emu.port) as c:
+            await c.send(chunk)
+            data = b""
+            with contextlib.suppress(TimeoutError):
+                while True:
+                    data += await c.read_frame(timeout=0.5)
+        return data
+
+    whole = await answer(await kvp9(emulator_factory))
+    monkeypatch.setattr(kvp9_connection, "IMMEDIATE", 0.0)
+    monkeypatch.setattr(server, "SLICE", 0.0)
+    monkeypatch.setattr(server, "ROUND", 0.0)
+    emu = await kvp9(emulator_factory)
+    served: list[int] = []
+    original = kvp9_connection.Kvp9Connection._serve
+
+    def counted(self: kvp9_connection.Kvp9Connection, budget: float) -> None:
+        served.append(1)
+        original(self, budget)
+
+    monkeypatch.setattr(kvp9_connection.Kvp9Connection, "_serve", counted)
+    assert await answer(emu) == whole
+    assert len(whole) > 100 and len(served) >= 6  # it really paused, many times
