@@ -178,7 +178,7 @@ def _mode3(msg_id: int, name: bytes, payload: bytes) -> bytes:
         (
             H("0001 0002 0003 04"),
             [(b"W[1]", b"1"), (b"W[2]", b"2"), (b"W[3]", b"3"), (b"W[4]", b"0")],
-        ),  # 3.5 -> 4  # fmt: skip
+        ),  # 3.5 -> 4
         (H("01"), []),  # 0.5 -> 0
         (H("FFFF"), [(b"W[1]", b"65535")]),  # wordToLong is unsigned
     ],
