@@ -14,7 +14,7 @@ import pytest
 
 from kukavarproxy_emu.testing import EmulatorFactory
 from pyopenshowvar import Client, KvpConnectionError, KvpTimeoutError
-from pyopenshowvar.protocol import Mode, Reply, Request, encode_read, encode_reply, encode_write
+from pyopenshowvar.protocol import Mode, Reply, Request, encode_reply
 from pyopenshowvar.testing import FakeProxy, answer
 
 NAMES = [f"N{i}" for i in range(8)]
