@@ -285,12 +285,12 @@ async def test_the_issues_case_a_legacy_emulator_dropping_the_fourth_reply(
         )
         if sync_client:
 
-            def run() -> dict[str, object]:
-                with sync.Client(emu.host, emu.port, timeout=0.3, keepalive=None) as kvp:
+            def run(port: int) -> dict[str, object]:
+                with sync.Client("127.0.0.1", port, timeout=0.3, keepalive=None) as kvp:
                     res = kvp.read_many(names)
                 return {n: r.text if r.ok else r.error for n, r in res.items()}
 
-            results = await asyncio.to_thread(run)
+            results = await asyncio.to_thread(run, emu.port)
         else:
             async with Client(emu.host, emu.port, timeout=0.3, keepalive=None) as kvp:
                 res = await kvp.read_many(names)
