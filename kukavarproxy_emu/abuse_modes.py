@@ -69,7 +69,11 @@ async def in_flood(
     """Send ``depth`` reads of ``name`` in one write and take all their replies, again and
     again. Each reply has the size of the first one; a batch that arrives with another size
     or header counts as wrong."""
-    reader, writer = await asyncio.open_connection(host, port)
+    try:
+        reader, writer = await asyncio.open_connection(host, port)
+    except OSError:
+        tally.errors += 1
+        return
     tally.connections += 1
     try:
         writer.write(encode_read(1, name))
@@ -116,7 +120,11 @@ def big_module(name: str, size: int) -> bytes:
 async def c3_selects(host: str, port: int, tally: AbuseTally, *, module: str) -> None:
     """Select ``module`` (a C3 #10 select), wait for the answer, again and again; a failure
     code counts as wrong (the module is valid and nothing runs)."""
-    reader, writer = await asyncio.open_connection(host, port)
+    try:
+        reader, writer = await asyncio.open_connection(host, port)
+    except OSError:
+        tally.errors += 1
+        return
     tally.connections += 1
     n = 0
     try:
@@ -142,15 +150,15 @@ _GARBAGE_TYPES = (0, 1, 4, 5, 6, 7, 13, 14, 17, 20, 21, 22, 23, 24, 25, 26, 27, 
 
 
 def _c3_garbage_frame(rng: random.Random, msg_id: int) -> bytes:
-    kind = rng.randrange(5)
+    kind = rng.randrange(10)
     msg_type = rng.choice(_GARBAGE_TYPES)
-    if kind == 0:  # random payload
+    if kind < 4:  # random payload
         payload = rng.randbytes(rng.randint(0, 64))
-    elif kind == 1:  # a length prefix announcing more than is there
+    elif kind < 6:  # a length prefix announcing more than is there
         payload = bytes((rng.randrange(256),)) + b"\xff\xff" + rng.randbytes(rng.randint(0, 8))
-    elif kind == 2:  # nothing at all
+    elif kind < 8:  # nothing at all
         payload = b""
-    elif kind == 3:  # the motion of the issue: a 400-digit integer (no robot moves: no program
+    elif kind == 8:  # the motion of the issue: a 400-digit integer (no robot moves: no program
         # is selected, and a motion to such a target is refused whatever the robot does)
         msg_type = 11
         text = "{A1 " + "9" * 400 + "}"
