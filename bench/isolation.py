@@ -16,7 +16,12 @@ The emulator runs in its own process (``kukavarproxy-emu``), the bystander
    clients — how many values of *other* variables came back as success;
 5. the cost of the legacy-id rule: ``read_many`` of 20 INTs per second against an emulator
    that echoes ids (pipelined) and one with the pre-9.0 bug (one request in flight), without
-   latency and with the ``kvp`` latency profile.
+   latency and with the ``kvp`` latency profile;
+6. how long one event-loop iteration holds the loop, with the emulator in this process and
+   the abusers in another: under the ``$IN[]`` flood the CPU time of the loop thread per
+   iteration (``time.thread_time``, blind to other processes' load), for ``--wire kvp9`` and
+   ``--wire robust``; during eight 64 KiB C3 selects the wall time per iteration (a select's
+   slices run in a worker thread while the loop thread waits).
 
 Like every benchmark it asserts nothing::
 
@@ -26,16 +31,20 @@ Like every benchmark it asserts nothing::
 from __future__ import annotations
 
 import asyncio
+import gc
+import multiprocessing as mp
 import socket
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _common import Row, base_parser, machine_info, median, print_rows, write_json
 
+from kukavarproxy_emu import Emulator, EmulatorConfig
 from kukavarproxy_emu.abuse import AbuseTally, EmulatorProcess, ProbeResult, start_probe
 from kukavarproxy_emu.abuse_modes import PeakRss, big_module, c3_selects, in_flood
 from pyopenshowvar import Client, sync
@@ -233,17 +242,80 @@ def legacy_cost(seconds: float, repeat: int, config: str) -> list[Row]:
     return rows
 
 
+def _flood_process(port: int, seconds: float, module: str | None) -> None:
+    async def main() -> None:
+        tally = AbuseTally()
+        if module is None:
+            tasks = [asyncio.create_task(in_flood("127.0.0.1", port, tally)) for _ in range(10)]
+        else:
+            tasks = [
+                asyncio.create_task(c3_selects("127.0.0.1", port, tally, module=module))
+                for _ in range(8)
+            ]
+        await asyncio.sleep(seconds)
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+
+    asyncio.run(main())
+
+
+async def _iterations(config: EmulatorConfig, seconds: float, c3: bool, size: int) -> list[float]:
+    """Seconds each event-loop iteration took (CPU of the loop thread, or wall time for C3)."""
+    clock = time.perf_counter if c3 else time.thread_time
+    gaps: list[float] = []
+    async with Emulator(config) as emu:
+        gc.collect()
+        gc.freeze()  # as kukavarproxy-emu does: the start-up heap is never scanned again
+        module = None
+        if c3:
+            assert emu.c3 is not None
+            path = "KRC:\\R1\\Program\\BIGMOD.SRC"
+            emu.c3.vfs.write(path, big_module("BIGMOD", size), overwrite=True)
+            module = MODULE
+        proc = mp.get_context("spawn").Process(
+            target=_flood_process, args=(emu.port, seconds, module)
+        )
+        proc.start()
+        t = clock()
+        while proc.is_alive():
+            await asyncio.sleep(0)
+            now = clock()
+            gaps.append(now - t)
+            t = now
+    gc.unfreeze()
+    return sorted(gaps)
+
+
+def loop_holds(seconds: float, repeat: int, size: int) -> list[Row]:
+    rows = []
+    base = EmulatorConfig(port=0, discovery=False, robot=False, max_clients=30)
+    cases = [
+        ("--wire kvp9, $IN[] flood: loop CPU per iteration", replace(base, wire="kvp9"), False),
+        ("--wire robust, $IN[] flood: loop CPU per iteration", base, False),
+        ("C3 Bridge, 8 selects: loop wall time per iteration",
+         replace(base, proxy="c3bridge", robot=True, plant="ideal"), True),
+    ]  # fmt: skip
+    for label, config, c3 in cases:
+        runs = [asyncio.run(_iterations(config, seconds, c3, size)) for _ in range(repeat)]
+        worst = [g[-1] * 1e3 for g in runs]
+        p99 = [g[int(len(g) * 0.99)] * 1e3 for g in runs]
+        rows.append(Row(f"{label}, max", median(worst), "ms", runs=worst,
+                        note=f"p99 per run {[round(x, 2) for x in p99]} ms"))  # fmt: skip
+    return rows
+
+
 def main() -> None:
     ap = base_parser(__doc__)
     ap.add_argument("--seconds", type=float, default=None)
     ap.add_argument(
-        "--only", nargs="*", default=None, help="kvp9 robust c3select motion legacy cost"
+        "--only", nargs="*", default=None, help="kvp9 robust c3select motion legacy cost holds"
     )
     args = ap.parse_args()
     seconds = args.seconds or (1.0 if args.quick else 3.0)
     repeat = args.repeat or (1 if args.quick else 3)
     size = 8 * 1024 if args.quick else 64 * 1024 - 512
-    only = set(args.only or ["kvp9", "robust", "c3select", "motion", "legacy", "cost"])
+    only = set(args.only or ["kvp9", "robust", "c3select", "motion", "legacy", "cost", "holds"])
     rows: list[Row] = []
     with tempfile.TemporaryDirectory() as tmp:
         config = str(Path(tmp) / "iso.dat")
@@ -260,6 +332,8 @@ def main() -> None:
             rows += legacy_drop(config)
         if "cost" in only:
             rows += legacy_cost(seconds, repeat, config)
+        if "holds" in only:
+            rows += loop_holds(seconds, repeat, size)
     print_rows("Isolation of the kvp9 and C3 Bridge modes; legacy-id proxies", rows)
     write_json(args.json, "isolation", rows, {"machine": machine_info()})
 
