@@ -255,12 +255,9 @@ class Kvp9Connection(asyncio.BufferedProtocol):
         if self.worker is None and self._parked is None and not self.emu.slow:
             self._start(data)
             return
-        self._backlog.append(data)
-        if self._parked is not None:  # arrived before the pause took effect: served after it
-            self._set_reading(False)
-            return
+        self._backlog.append(data)  # served after the read in progress (parked or worker)
         self._set_reading(False)
-        if self.worker is None:
+        if self.worker is None and self._parked is None:
             self.worker = asyncio.get_running_loop().create_task(self._work())
 
     def eof_received(self) -> bool:
