@@ -137,8 +137,11 @@ def test_an_empty_value_is_unknown_not_an_empty_text() -> None:
         bytes.fromhex("0000 000A 00 0009") + b"v:BAD" + bytes.fromhex("0001 01"),  # V too big
         bytes.fromhex("0000 000C 00 0003") + b"v:BAD" + bytes.fromhex("0001 01"),  # V too small
         bytes.fromhex("0000 000B 01 0005") + b"v:BAD" + bytes.fromhex("0001 01"),  # mode 1
+        # L agrees with the bytes sent, V does not (the fast path must check V too)
+        bytes.fromhex("0000 000B 00 0003") + b"v:BAD" + bytes.fromhex("0001 01"),
+        bytes.fromhex("0000 000B 00 0004") + b"v:BAD" + bytes.fromhex("0001 01"),
     ],
-    ids=["cut", "value-length-over", "value-length-under", "write-mode"],
+    ids=["cut", "value-length-over", "value-length-under", "write-mode", "v-3", "v-4"],
 )
 def test_a_malformed_or_mismatched_reply_is_never_a_value(frame: bytes) -> None:
     with (
@@ -186,7 +189,10 @@ def test_message_ids_wrap_from_65535_to_0_on_the_fast_paths() -> None:
         kvp.connection.session.next_id = 0xFFFE
         assert [kvp.read(n) for n in ("B", "C", "D")] == ["v:B", "v:C", "v:D"]
         assert kvp.write("E", "5") == "5"  # the write takes the idle path too
-        assert seen[-4:] == [0xFFFE, 0xFFFF, 0, 1]
+        assert kvp.read("F") == "v:F"
+        assert kvp.write("G", "6") == "6"
+        assert kvp.read("H") == "v:H"
+        assert seen[-7:] == [0xFFFE, 0xFFFF, 0, 1, 2, 3, 4]
         assert kvp.connection.in_flight == 0
 
 

@@ -19,6 +19,7 @@ from kukavarproxy_emu.testing import EmulatorFactory, RawClient
 from pyopenshowvar.c3.constants import ErrorCode
 from pyopenshowvar.c3.files import FileWriteBegin, FileWriteData
 from pyopenshowvar.c3.messages import ProgramControl, ProgramSelect
+from pyopenshowvar.c3.replies import Outcome
 from pyopenshowvar.protocol import decode_reply, encode_read
 
 H = bytes.fromhex
@@ -370,3 +371,54 @@ async def test_a_start_sent_during_a_select_waits_for_it(c3: Emulator) -> None:
         assert await second.read_frame(timeout=30) == answer(2, 10, H("02"), 1)
         # the program runs now: the second select is refused, not half-done
         assert await second.read_frame(timeout=30) == answer(3, 10, H("05"), 0)
+
+
+# ------------------------------------------------------------------------ session hooks
+
+
+def test_decode_kind_and_weight() -> None:
+    from kukavarproxy_emu.c3 import C3Server
+    from kukavarproxy_emu.store import VariableStore
+    from pyopenshowvar.errors import ProtocolError
+    from pyopenshowvar.protocol import Request
+
+    session = C3Server(VariableStore(), None).session()
+    assert session.decode(H("0102 0003 00 AABB")) == Request(0x0102, 0, "", H("AABB"))
+    assert session.decode(H("0102 0001 3F")) == Request(0x0102, 63, "", b"")
+    with pytest.raises(ProtocolError, match="length 0"):
+        session.decode(H("0102 0000"))
+
+    def kind(msg_type: int, payload: bytes = b"") -> str | None:
+        return session.kind(Request(1, msg_type, "", payload))
+
+    # which messages cost a CrossComm service time, and which kind (latency profiles)
+    assert [kind(0), kind(1), kind(4), kind(5), kind(6), kind(7)] == [
+        "read", "write", "read", "write", "read", "write",
+    ]  # fmt: skip
+    assert [kind(10), kind(11), kind(12), kind(13), kind(14), kind(17), kind(63)] == [
+        "write", "write", "write", None, None, "read", "write",
+    ]  # fmt: skip
+    assert [kind(29, H("04")), kind(29, H("02")), kind(29), kind(30, H("01")), kind(30, H("02"))] == [
+        "write", None, None, "read", None,
+    ]  # fmt: skip
+    assert [kind(21), kind(22), kind(26)] == ["read", "write", "read"]
+    weight = session.weight
+    assert weight(Request(1, 6, "", H("05"))) == 5 and weight(Request(1, 7, "", H("03"))) == 3
+    assert weight(Request(1, 6, "", H("00"))) == 1 and weight(Request(1, 6, "", b"")) == 1
+    assert weight(Request(1, 4, "", H("09"))) == 1
+
+
+async def test_benchmark_times_with_the_servers_tick(c3: Emulator, raw: RawClient) -> None:
+    from pyopenshowvar.c3.replies import BenchmarkReply
+
+    assert c3.c3 is not None
+    before = c3.c3.tick_ms()
+    out = decode_reply(await raw.request(frame(1, 17, H("00 01 00000064") + W("RULE_A"))))
+    reply = BenchmarkReply.parse(Outcome.of(out).reader())
+    after = c3.c3.tick_ms()
+    assert out.ok and (reply.write, reply.count, reply.iterations) == (False, 1, 100)
+    # milliseconds since the server started, GetTickCount-like: between the two readings
+    assert before <= reply.start_ms <= after and before < 10 * 60 * 1000
+    assert reply.stop_ms - reply.start_ms == reply.elapsed_ms <= after - before + 1
+    await asyncio.sleep(0.05)
+    assert c3.c3.tick_ms() - after >= 45  # it counts milliseconds
