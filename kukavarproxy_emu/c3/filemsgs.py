@@ -89,8 +89,10 @@ class FileHandlers:
         items = self.vfs.listing(msg.path, recursive=bool(msg.flags & ListFlag.RECURSIVE))
         names = tuple(path for path, _ in items)
         infos = tuple(_info(entry) for _, entry in items)
-        size = 4 + sum(2 + 2 * units(s) for s in (*names, *infos))
-        if size > SAFE_PAYLOAD:  # the server's check before it builds the answer
+        # the server's check before it builds the answer: the strings' bytes and one u16 each
+        # (its two count fields are not counted)
+        size = sum(2 + 2 * units(s) for s in (*names, *infos))
+        if size > SAFE_PAYLOAD:
             return f.NameList(()).payload(), ErrorCode.LONG_ANSWER
         return f.NameList(names, infos).payload(), ErrorCode.SUCCESS
 

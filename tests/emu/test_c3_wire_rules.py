@@ -35,6 +35,10 @@ def A(text: str) -> bytes:
     return struct.pack(">H", len(text)) + text.encode("latin-1")
 
 
+async def outcome(raw: RawClient, message: bytes) -> Outcome:
+    return Outcome.of(decode_reply(await raw.request(message)))
+
+
 def frame(tag: int, msg_type: int, payload: bytes = b"") -> bytes:
     return struct.pack(">HHB", tag, len(payload) + 1, msg_type) + payload
 
@@ -217,6 +221,7 @@ async def test_benchmark_answers_keep_what_was_parsed(raw: RawClient) -> None:
         (H("01 05"), *bench(1, 5, 0, ErrorCode.PROTOCOL)),  # the count it parsed
         (H("00 0C 00000003"), *bench(0, 10, 3, ErrorCode.PROTOCOL)),  # capped at 10, no names
         (H("01 01 00000002") + W("RULE_A"), *bench(1, 1, 2, ErrorCode.PROTOCOL)),  # no value
+        (H("00 01 FFFFFFFF"), *bench(0, 1, 0xFFFFFFFE, ErrorCode.PROTOCOL)),  # capped first
     ]
     for n, (payload, expected, code) in enumerate(cases, 1):
         assert await raw.request(frame(n, 17, payload)) == answer(n, 17, expected, code), payload
@@ -422,3 +427,117 @@ async def test_benchmark_times_with_the_servers_tick(c3: Emulator, raw: RawClien
     assert reply.stop_ms - reply.start_ms == reply.elapsed_ms <= after - before + 1
     await asyncio.sleep(0.05)
     assert c3.c3.tick_ms() - after >= 45  # it counts milliseconds
+
+
+# ------------------------------------------------------------------------ file rules
+
+
+def _files() -> tuple[object, object, object]:
+    from kukavarproxy_emu.c3.control import RobotControl
+    from kukavarproxy_emu.c3.filemsgs import FileHandlers, IoBuffers
+    from kukavarproxy_emu.c3.vfs import VirtualFS
+
+    vfs = VirtualFS()
+    handlers = FileHandlers(vfs, RobotControl(None, vfs), lambda: 0, 1 << 30)
+    return vfs, handlers, IoBuffers()
+
+
+def test_name_list_answers_long_answer_past_the_servers_safe_size() -> None:
+    from kukavarproxy_emu.c3.filemsgs import SAFE_PAYLOAD, _info
+    from kukavarproxy_emu.c3.vfs import Limits
+    from pyopenshowvar.c3.files import FileNameList
+
+    vfs, handlers, io = _files()
+    vfs.mkdir("KRC:\\BIG")  # type: ignore[attr-defined]
+    vfs.write("KRC:\\BIG\\A.SRC", b"", overwrite=False)  # type: ignore[attr-defined]
+
+    def listing() -> tuple[bytes, int]:
+        payload = FileNameList("KRC:\\BIG").payload()
+        return handlers.handle(21, payload, io)  # type: ignore[attr-defined,no-any-return]
+
+    def cost(text: str) -> int:  # the server: SysStringByteLen + a u16 per string
+        return 2 + 2 * len(text)
+
+    out, code = listing()
+    assert code == ErrorCode.SUCCESS
+    used = cost("KRC:\\BIG\\A.SRC") + cost(_info(vfs.read("KRC:\\BIG\\A.SRC")))  # type: ignore[attr-defined]
+    vfs.write("KRC:\\BIG\\B.SRC", b"", overwrite=False)  # type: ignore[attr-defined]
+    info_b = cost(_info(vfs.read("KRC:\\BIG\\B.SRC")))  # type: ignore[attr-defined]
+    vfs.delete("KRC:\\BIG\\B.SRC", force=True)  # type: ignore[attr-defined]
+    # a second file whose name makes the listing exactly SafePayloadSize: still answered
+    stem = (SAFE_PAYLOAD - used - info_b - 2) // 2 - len("KRC:\\BIG\\.SRC")
+    name = "KRC:\\BIG\\" + "N" * stem + ".SRC"
+    assert used + cost(name) + info_b == SAFE_PAYLOAD
+    vfs.limits = Limits(path_length=10**6)  # type: ignore[attr-defined]
+    vfs.write(name, b"", overwrite=False)  # type: ignore[attr-defined]
+    out, code = listing()
+    assert code == ErrorCode.SUCCESS and out[:2] == H("0002")
+    vfs.delete(name, force=True)  # type: ignore[attr-defined]
+    vfs.write(name.replace(".SRC", "X.SRC"), b"", overwrite=False)  # type: ignore[attr-defined]
+    out, code = listing()  # one character (two bytes) more
+    assert (code, out) == (ErrorCode.LONG_ANSWER, H("0000 0000"))
+
+
+async def test_file_flags_are_honoured(c3: Emulator, raw: RawClient) -> None:
+    from pyopenshowvar.c3.files import FileCopy, FileCreate, FileGetProperties, FileNameList
+
+    assert c3.c3 is not None
+    vfs = c3.c3.vfs
+    d = "KRC:\\R1\\Program\\"
+    # #22: a file unless the item type says directory
+    assert (await outcome(raw, FileCreate(d + "NEW.SRC").frame(1))).ok
+    assert not vfs.is_dir(d + "NEW.SRC") and d + "NEW.SRC" in {f.path for f in vfs.files.values()}
+    assert (await outcome(raw, FileCreate(d + "SUB", item_type=1).frame(2))).ok
+    assert vfs.is_dir(d + "SUB")
+    props = await outcome(raw, FileGetProperties(d + "SUB").frame(3))
+    assert props.ok and props.payload[:4] == H("00000001")
+    # #21: only the directory's own items unless recursive
+    top = await outcome(raw, FileNameList("KRC:\\R1").frame(4))
+    deep = await outcome(raw, FileNameList("KRC:\\R1", flags=1).frame(5))
+    assert top.ok and deep.ok and len(deep.payload) > len(top.payload)
+    assert (d + "NEW.SRC").encode("utf-16-le") in deep.payload
+    assert (d + "NEW.SRC").encode("utf-16-le") not in top.payload
+    # #24: no overwrite without the flag
+    vfs.write(d + "A.SRC", b"a", overwrite=True)
+    vfs.write(d + "B.SRC", b"b", overwrite=True)
+    refused = await outcome(raw, FileCopy(d + "A.SRC", d + "B.SRC", 0).frame(6))
+    assert not refused.ok and vfs.read(d + "B.SRC").data == b"b"
+    assert (await outcome(raw, FileCopy(d + "A.SRC", d + "B.SRC", 64).frame(7))).ok
+    assert vfs.read(d + "B.SRC").data == b"a"
+
+
+async def test_upload_onto_a_read_only_file_needs_the_force_flag(
+    c3: Emulator, raw: RawClient
+) -> None:
+    assert c3.c3 is not None
+    vfs = c3.c3.vfs
+    path = "KRC:\\R1\\Program\\RO.SRC"
+    vfs.write(path, b"old", overwrite=True)
+    vfs.set_attributes(path, 1, 1)  # read-only
+    end = frame(3, 29, H("04 00000040") + W(path))  # overwrite, not read-only ones
+    assert (await outcome(raw, FileWriteBegin(3).frame(1))).ok
+    assert (await outcome(raw, FileWriteData(0, b"new").frame(2))).ok
+    assert await raw.request(end) == answer(3, 29, H("04"), ErrorCode.ACCESS)
+    assert vfs.read(path).data == b"old"
+    forced = frame(4, 29, H("04 00001040") + W(path))  # + CopyFlag.OVERWRITE_READ_ONLY
+    assert await raw.request(forced) == answer(4, 29, H("04"), 1)
+    assert vfs.read(path).data == b"new"
+
+
+async def test_download_chunk_of_size_zero_is_empty(raw: RawClient) -> None:
+    begin = frame(1, 30, H("01 00000000") + W("KRC:\\R1\\Program\\FOLLOW.SRC"))
+    assert decode_reply(await raw.request(begin)).ok
+    assert await raw.request(frame(2, 30, H("02 00000000 00000000"))) == answer(
+        2, 30, H("02 00000000 00000000"), 1
+    )
+
+
+async def test_a_krl_variable_named_ping_wins_over_the_internal_one(
+    emulator_factory: EmulatorFactory,
+) -> None:
+    emu = await emulator_factory(
+        proxy="c3bridge", robot=False, dat_text="DEFDAT $CONFIG\nDECL INT PING=5\nENDDAT\n"
+    )
+    async with await RawClient.connect(emu.host, emu.port) as raw:
+        assert await raw.request(frame(1, 0, A("PING"))) == H("0001 0007 00 0001 35 0001 01")
+        assert await raw.request(frame(2, 4, W("PING"))) == answer(2, 4, W("5"), 1)

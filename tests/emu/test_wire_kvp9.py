@@ -204,6 +204,7 @@ async def test_latency_no_read_while_a_read_is_served(emulator_factory: Emulator
     assert ids == [H("0001"), H("0001"), H("0002"), H("0002")]
     (info,) = emu.connections()
     assert isinstance(info, Kvp9ConnectionInfo) and info.reads == 2
+    assert (info.buffered, info.pending, info.received) == (0, 0, 4)  # nothing survives a read
 
 
 async def test_faults_apply_to_replies(emulator_factory: EmulatorFactory) -> None:
