@@ -100,6 +100,7 @@ class RobotControl:
         self.selected = ""
         #: Set while a select parses and loads its module, done when it has ended.
         self._loading: asyncio.Future[None] | None = None
+        self._select_task: asyncio.Task[int] | None = None
 
     # ------------------------------------------------------------------ state
 
@@ -167,7 +168,8 @@ class RobotControl:
             (dat.path, dat.data.decode("latin-1")) if dat is not None else None,
             robot.store,
         )
-        loaded = self._loading = asyncio.get_running_loop().create_future()
+        loop = asyncio.get_running_loop()
+        loaded = self._loading = loop.create_future()
 
         async def finish() -> int:
             try:
@@ -187,7 +189,10 @@ class RobotControl:
                     code = ErrorCode.GENERAL
             return code
 
-        return finish
+        # A task of its own: the select completes even if its client goes away at once (as
+        # the server's COM call does), and the waiters behind it are always released.
+        self._select_task = loop.create_task(finish())
+        return partial(asyncio.shield, self._select_task)
 
     @property
     def selecting(self) -> bool:
@@ -205,8 +210,8 @@ class RobotControl:
         """Make ``program`` (parsed and loaded) the robot's program."""
         robot = self.robot
         assert robot is not None
-        if self._state() == "P_ACTIVE" or not self._standstill():  # cannot happen meanwhile:
-            self._message("select refused: stop the running program first")  # start refused
+        if self._state() == "P_ACTIVE" or not self._standstill():  # starts and motions wait
+            self._message("select refused: stop the running program first")  # for selects
             return ErrorCode.GENERAL
         robot.kernel.stop(hard=True)
         robot.kernel.hold = False

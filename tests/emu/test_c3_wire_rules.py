@@ -307,6 +307,11 @@ async def test_download_fields_kept_on_failure(raw: RawClient) -> None:
     assert await raw.request(frame(5, 30, H("02 00100000 00000004"))) == answer(
         5, 30, H("02 00100000 00000000"), 1
     )
+    total = int.from_bytes(size[1:], "big")
+    near_end = await raw.request(
+        frame(10, 30, H("02") + (total - 2).to_bytes(4, "big") + H("0000000A"))
+    )
+    assert near_end[5:14] == H("02") + (total - 2).to_bytes(4, "big") + H("00000002")
     assert await raw.request(frame(6, 30, H("04"))) == answer(6, 30, H("04"), 1)
     assert await raw.request(frame(7, 30, H("03"))) == answer(7, 30, H("03 00000000"), 1)
     assert await raw.request(frame(8, 30, H("07"))) == answer(
@@ -490,7 +495,8 @@ async def test_file_flags_are_honoured(c3: Emulator, raw: RawClient) -> None:
     assert (await outcome(raw, FileCreate(d + "SUB", item_type=1).frame(2))).ok
     assert vfs.is_dir(d + "SUB")
     props = await outcome(raw, FileGetProperties(d + "SUB").frame(3))
-    assert props.ok and props.payload[:4] == H("00000001")
+    # item type, size (low, high), attributes: a directory of no size
+    assert props.ok and props.payload[:16] == H("00000001 00000000 00000000 00000010")
     # #21: only the directory's own items unless recursive
     top = await outcome(raw, FileNameList("KRC:\\R1").frame(4))
     deep = await outcome(raw, FileNameList("KRC:\\R1", flags=1).frame(5))
@@ -541,3 +547,21 @@ async def test_a_krl_variable_named_ping_wins_over_the_internal_one(
     async with await RawClient.connect(emu.host, emu.port) as raw:
         assert await raw.request(frame(1, 0, A("PING"))) == H("0001 0007 00 0001 35 0001 01")
         assert await raw.request(frame(2, 4, W("PING"))) == answer(2, 4, W("5"), 1)
+
+
+async def test_a_select_whose_client_left_still_completes_and_frees_the_next(
+    c3: Emulator,
+) -> None:
+    """A client that sends a select and disconnects at once: the select goes through (as a
+    COM call on C3 Bridge would), and the next select is not left waiting for it."""
+    assert c3.c3 is not None
+    c3.c3.vfs.write("KRC:\\R1\\Program\\GONE.SRC", big_module("GONE", 8_000), overwrite=True)
+    for _ in range(3):
+        gone = await RawClient.connect(c3.host, c3.port)
+        await gone.send(ProgramSelect("/R1/GONE").frame(1))
+        gone.writer.transport.abort()  # a reset right behind the select
+    async with await RawClient.connect(c3.host, c3.port) as raw:
+        reply = await raw.request(ProgramSelect("/R1/FOLLOW").frame(2), timeout=20)
+        assert reply == answer(2, 10, H("05"), 1)
+    assert not c3.c3.control.selecting
+    assert c3.store.read("$PRO_NAME1[]") == '"FOLLOW"'
