@@ -45,8 +45,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import Row, base_parser, machine_info, median, print_rows, write_json
 
 from kukavarproxy_emu import Emulator, EmulatorConfig
-from kukavarproxy_emu.abuse import AbuseTally, EmulatorProcess, ProbeResult, start_probe
-from kukavarproxy_emu.abuse_modes import PeakRss, big_module, c3_selects, in_flood
+from kukavarproxy_emu.abuse import AbuseTally, EmulatorProcess, ProbeResult
+from kukavarproxy_emu.abuse_modes import big_module, c3_selects, in_flood, run_abuse
 from pyopenshowvar import Client, sync
 from pyopenshowvar.c3.messages import Motion, ProgramSelect
 from pyopenshowvar.protocol import HEADER_SIZE, decode_reply
@@ -63,20 +63,7 @@ def _abuse(
     emu: EmulatorProcess, abusers: list[object], seconds: float
 ) -> tuple[ProbeResult, AbuseTally, float]:
     """Bystander + abusers for ``seconds``: (probe, tally, peak RSS growth in MB)."""
-    peak = PeakRss(emu.pid)
-    before = peak.reset()
-    tally = AbuseTally()
-    probe = start_probe(emu.host, emu.port, seconds, "ABUSE_PROBE")
-
-    async def attack() -> None:
-        tasks = [asyncio.create_task(a(emu.host, emu.port, tally)) for a in abusers]  # type: ignore[operator]
-        await asyncio.sleep(seconds)
-        for task in tasks:
-            task.cancel()
-        await asyncio.gather(*tasks, return_exceptions=True)
-
-    asyncio.run(attack())
-    return probe.result(), tally, peak.peak_mb() - before
+    return run_abuse(emu, abusers, seconds)  # type: ignore[arg-type]
 
 
 #: The bystander's socket timeout (s): a probe that errs waited at least this long.

@@ -10,7 +10,9 @@ and the peak memory of a process: tools of the abuse suite (``tests/abuse``) and
 * :func:`big_module` — a valid KRL module of about ``size`` bytes (a long straight routine);
 * :class:`PeakRss` — resident memory high-water mark of a process since :meth:`PeakRss.reset`
   (Linux ``VmHWM``, reset through ``/proc/PID/clear_refs``), so a test sees the peak *during*
-  the abuse, not what is left after the abusers went away.
+  the abuse, not what is left after the abusers went away;
+* :func:`run_abuse` — the bystander and a set of abusers against an emulator process, with
+  that peak.
 
 Abusers count what they see in an :class:`~kukavarproxy_emu.abuse.AbuseTally` and never
 assert; ``errors`` counts what a well-behaved server should never cause (a refused connect, an
@@ -22,14 +24,19 @@ from __future__ import annotations
 import asyncio
 import random
 import struct
+from collections.abc import Callable, Coroutine, Sequence
 from pathlib import Path
+from typing import Any
 
 from pyopenshowvar.c3.messages import ProgramSelect
 from pyopenshowvar.protocol import HEADER_SIZE, decode_reply, encode_read
 
-from .abuse import AbuseTally
+from .abuse import AbuseTally, EmulatorProcess, ProbeResult, start_probe
 
-__all__ = ["PeakRss", "big_module", "c3_garbage", "c3_selects", "in_flood"]
+__all__ = ["Abuser", "PeakRss", "big_module", "c3_garbage", "c3_selects", "in_flood", "run_abuse"]
+
+#: An abuser: ``abuser(host, port, tally)`` misbehaves until cancelled.
+Abuser = Callable[[str, int, AbuseTally], Coroutine[Any, Any, None]]
 
 _U16 = struct.Struct(">H")
 
@@ -63,18 +70,53 @@ async def _read_exactly(reader: asyncio.StreamReader, size: int, timeout: float)
         return await reader.readexactly(size)
 
 
+async def _open(
+    host: str, port: int, tally: AbuseTally
+) -> tuple[asyncio.StreamReader, asyncio.StreamWriter] | None:
+    """A connection, counted; None (an error counted) when it is refused."""
+    try:
+        streams = await asyncio.open_connection(host, port)
+    except OSError:
+        tally.errors += 1
+        return None
+    tally.connections += 1
+    return streams
+
+
+def run_abuse(
+    emu: EmulatorProcess, abusers: Sequence[Abuser], seconds: float
+) -> tuple[ProbeResult, AbuseTally, float]:
+    """The bystander (its own process) and ``abusers`` (this process) against ``emu`` for
+    ``seconds``: (what the bystander saw, what the abusers counted, the emulator's peak RSS
+    growth in MB during the abuse). An abuser that raises counts as an error."""
+    peak = PeakRss(emu.pid)
+    before = peak.reset()
+    tally = AbuseTally()
+    probe = start_probe(emu.host, emu.port, seconds, "ABUSE_PROBE")
+
+    async def attack() -> None:
+        tasks = [asyncio.create_task(a(emu.host, emu.port, tally)) for a in abusers]
+        await asyncio.sleep(seconds)
+        for task in tasks:
+            task.cancel()
+        for outcome in await asyncio.gather(*tasks, return_exceptions=True):
+            if isinstance(outcome, Exception):
+                tally.errors += 1
+
+    asyncio.run(attack())
+    return probe.result(), tally, peak.peak_mb() - before
+
+
 async def in_flood(
     host: str, port: int, tally: AbuseTally, *, name: str = "$IN[]", depth: int = 100
 ) -> None:
     """Send ``depth`` reads of ``name`` in one write and take all their replies, again and
     again. Each reply has the size of the first one; a batch that arrives with another size
     or header counts as wrong."""
-    try:
-        reader, writer = await asyncio.open_connection(host, port)
-    except OSError:
-        tally.errors += 1
+    streams = await _open(host, port, tally)
+    if streams is None:
         return
-    tally.connections += 1
+    reader, writer = streams
     try:
         writer.write(encode_read(1, name))
         head = await _read_exactly(reader, HEADER_SIZE, 10.0)
@@ -120,12 +162,10 @@ def big_module(name: str, size: int) -> bytes:
 async def c3_selects(host: str, port: int, tally: AbuseTally, *, module: str) -> None:
     """Select ``module`` (a C3 #10 select), wait for the answer, again and again; a failure
     code counts as wrong (the module is valid and nothing runs)."""
-    try:
-        reader, writer = await asyncio.open_connection(host, port)
-    except OSError:
-        tally.errors += 1
+    streams = await _open(host, port, tally)
+    if streams is None:
         return
-    tally.connections += 1
+    reader, writer = streams
     n = 0
     try:
         while True:
@@ -176,13 +216,11 @@ async def c3_garbage(host: str, port: int, tally: AbuseTally, *, seed: int = 0) 
     C3 Bridge answers every message of a handled type, malformed or not."""
     rng = random.Random(seed)
     while True:
-        try:
-            reader, writer = await asyncio.open_connection(host, port)
-        except OSError:
-            tally.errors += 1
+        streams = await _open(host, port, tally)
+        if streams is None:
             await asyncio.sleep(0.01)
             continue
-        tally.connections += 1
+        reader, writer = streams
         try:
             for n in range(1, 50):
                 writer.write(_c3_garbage_frame(rng, n))

@@ -21,11 +21,12 @@ from __future__ import annotations
 
 import asyncio
 import sys
-from collections.abc import Callable, Coroutine, Iterator
+from collections.abc import Coroutine, Iterator
 from typing import Any
 
 import pytest
 
+from kukavarproxy_emu import abuse_modes
 from kukavarproxy_emu.abuse import (
     AbuseTally,
     EmulatorProcess,
@@ -33,9 +34,8 @@ from kukavarproxy_emu.abuse import (
     garbage,
     long_names,
     non_reader,
-    start_probe,
 )
-from kukavarproxy_emu.abuse_modes import PeakRss, big_module, c3_garbage, c3_selects, in_flood
+from kukavarproxy_emu.abuse_modes import Abuser, big_module, c3_garbage, c3_selects, in_flood
 from pyopenshowvar import sync
 
 pytestmark = [
@@ -49,8 +49,6 @@ P99_MS = 20.0
 CONFIG = "DEFDAT $CONFIG\nDECL INT ABUSE_PROBE=0\nENDDAT\n"
 MODULE = "/R1/BIGMOD"
 
-Abuser = Callable[[str, int, AbuseTally], Coroutine[Any, Any, None]]
-
 
 def bound(reference_p99: float) -> float:
     """What the bystander's p99 may be under abuse, from its p99 under the reference flood
@@ -61,23 +59,7 @@ def bound(reference_p99: float) -> float:
 def run_abuse(
     emu: EmulatorProcess, abusers: list[Abuser], seconds: float = SECONDS
 ) -> tuple[ProbeResult, AbuseTally, float]:
-    """Bystander and abusers together: (probe result, tally, peak RSS growth in MB)."""
-    peak = PeakRss(emu.pid)
-    before = peak.reset()
-    tally = AbuseTally()
-    probe = start_probe(emu.host, emu.port, seconds, "ABUSE_PROBE")
-
-    async def attack() -> None:
-        tasks = [asyncio.create_task(a(emu.host, emu.port, tally)) for a in abusers]
-        await asyncio.sleep(seconds)
-        for task in tasks:
-            task.cancel()
-        for outcome in await asyncio.gather(*tasks, return_exceptions=True):
-            if isinstance(outcome, Exception):
-                tally.errors += 1
-
-    asyncio.run(attack())
-    return probe.result(), tally, peak.peak_mb() - before
+    return abuse_modes.run_abuse(emu, abusers, seconds)
 
 
 def check_bystander(result: ProbeResult, growth: float, limit_ms: float, what: str) -> None:
