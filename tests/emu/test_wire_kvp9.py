@@ -275,37 +275,48 @@ async def test_a_long_read_is_served_in_slices_between_other_clients(
     emulator_factory: EmulatorFactory, monkeypatch: pytest.MonkeyPatch, path: str
 ) -> None:
     """170 reads of the 24 KB $IN[] in one 2048-byte read (~4 MB of replies) are answered in
-    slices: a bystander's read sent right after it is answered before the long read ends.
-    Both paths: parked on the fast path, yielding in the worker (faults armed, no latency)."""
+    slices: the event loop runs other work between them (here a ticker counting iterations;
+    in one go, all of the read's replies would be written within one iteration), and a
+    bystander is answered meanwhile. Both paths: parked on the fast path, yielding in the
+    worker (faults armed, no latency). Counting iterations, not time, holds on a loaded
+    machine."""
     from kukavarproxy_emu import kvp9_connection
 
     faults = (Fault("drop", nth=10**9),) if path == "worker" else ()
     emu = await kvp9(emulator_factory, faults=faults)
-    writes: list[int] = []
+    tick = [0]
+    writes: list[tuple[int, int]] = []  # (connection, loop iteration) of every write
     original = kvp9_connection.Kvp9Connection.write
 
     def logged(self: kvp9_connection.Kvp9Connection, data: bytes) -> None:
-        writes.append(self.index)
+        writes.append((self.index, tick[0]))
         original(self, data)
+
+    async def ticker() -> None:
+        while True:
+            await asyncio.sleep(0)
+            tick[0] += 1
 
     monkeypatch.setattr(kvp9_connection.Kvp9Connection, "write", logged)
     burst = b"".join(encode_read(i, "$IN[]") for i in range(170))
-    async with (
-        await RawClient.connect(emu.host, emu.port) as flood,
-        await RawClient.connect(emu.host, emu.port) as bystander,
-    ):
-        assert (await bystander.request(encode_read(1, "PING")))[:2] == H("0001")
-        flood_index, by_index = sorted(emu._connections)
-        writes.clear()
-        flood.writer.write(burst)
-        first = await flood.reader.readexactly(10)  # the long read is being answered
-        sink = asyncio.create_task(flood.reader.readexactly(170 * (24575 + 10) - 10))
-        assert (await bystander.request(encode_read(2, "PING"), timeout=10))[:2] == H("0002")
-        await asyncio.wait_for(sink, 30)
-    assert first[:2] == H("0000") and writes[0] == flood_index
-    # the long read's replies went on after the bystander's: it was served in slices (in one
-    # go, all of them would precede the bystander's, whose request came after the first)
-    assert flood_index in writes[writes.index(by_index) :]
+    counting = asyncio.create_task(ticker())
+    try:
+        async with (
+            await RawClient.connect(emu.host, emu.port) as flood,
+            await RawClient.connect(emu.host, emu.port) as bystander,
+        ):
+            assert (await bystander.request(encode_read(1, "PING")))[:2] == H("0001")
+            flood_index = min(emu._connections)
+            writes.clear()
+            flood.writer.write(burst)
+            sink = asyncio.create_task(flood.reader.readexactly(170 * (24575 + 10)))
+            assert (await bystander.request(encode_read(2, "PING"), timeout=10))[:2] == H("0002")
+            data = await asyncio.wait_for(sink, 30)
+    finally:
+        counting.cancel()
+    assert data[:2] == H("0000") and data[-3:] == H("000101")
+    ticks = [t for index, t in writes if index == flood_index]
+    assert ticks[-1] - ticks[0] >= 3, ticks  # the read's replies spread over iterations
 
 
 async def test_a_read_paused_at_every_step_answers_the_same_bytes(
