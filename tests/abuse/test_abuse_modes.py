@@ -173,7 +173,9 @@ def test_c3_malformed_messages_and_long_names(reference: float, c3: EmulatorProc
     # C3 Bridge answers every message of a handled type, malformed or not: no connection of
     # the garbage clients was closed on them, every reply carried its tag
     assert tally.errors == 0 and tally.wrong == 0, tally
-    assert tally.replies > 100, tally
+    # one message at a time each, some of them 10 000-operation benchmarks: a few hundred
+    # replies on a quiet machine, tens on a loaded one
+    assert tally.replies >= 20, tally
 
 
 def test_c3_clients_that_do_not_read(reference: float, c3: EmulatorProcess) -> None:
