@@ -26,6 +26,7 @@ are case-insensitive)::
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -424,10 +425,15 @@ def parse_declaration(raw: str, lineno: int, column: int, filename: str = "<src>
     return parser.result()
 
 
-def parse_dat(text: str, filename: str = "<dat>") -> DatFile:
-    """Parse the text of a data list; raises :class:`DatSyntaxError` on the first bad line."""
+def parse_dat(
+    text: str, filename: str = "<dat>", *, checkpoint: Callable[[], None] | None = None
+) -> DatFile:
+    """Parse the text of a data list; raises :class:`DatSyntaxError` on the first bad line.
+    ``checkpoint`` is called before every line (a long parse lets other work in)."""
     parser = _Parser(filename)
     for lineno, raw in enumerate(text.splitlines(), start=1):
+        if checkpoint is not None:
+            checkpoint()
         stripped = raw.lstrip()
         # "&ACCESS RVP", "&REL 1", "&PARAM ..." are editor metadata, not KRL.
         if not stripped or stripped.startswith("&"):

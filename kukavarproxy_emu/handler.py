@@ -21,17 +21,18 @@ from __future__ import annotations
 
 import logging
 import struct
+from collections.abc import Awaitable, Callable
 
 import numpy as np
 
-from pyopenshowvar.protocol import ENCODING, Mode, Reply, Request
+from pyopenshowvar.protocol import ENCODING, Mode, Reply, Request, decode_request
 
 from .config import EmulatorConfig
 from .latency import Kind
 from .logsafe import RateLimitedLog, clip
 from .store import UnknownVariable, VariableStore, WriteRefused
 
-__all__ = ["Responder", "build_store", "extract_variable_value"]
+__all__ = ["Deferred", "Responder", "build_store", "extract_variable_value"]
 
 log = logging.getLogger(__name__)
 #: Every line here can be provoked by any client at will: escaped (clip) and rate-limited.
@@ -44,6 +45,16 @@ _MAX_VALUE = 0xFFFF - 6
 _TOO_LONG = "\x00" * (_MAX_VALUE + 1)
 #: C3 Bridge's failure tail is error code 0 + flag 0; KVP's is the block length 1 + flag 0.
 _STRICT_CODE = b"\x00\x00"
+
+
+class Deferred(Exception):
+    """Raised by a responder's ``answer`` when the answer needs work spread over several
+    event-loop iterations (a C3 select parses its module in slices): the connection awaits
+    ``reply()`` and sends its result, and answers nothing after it meanwhile (in order)."""
+
+    def __init__(self, reply: Callable[[], Awaitable[Reply]]) -> None:
+        super().__init__("answer deferred")
+        self.reply = reply
 
 
 def _to_word(token: str) -> int:
@@ -104,6 +115,12 @@ def build_store(config: EmulatorConfig) -> VariableStore:
 class Responder:
     """Answers one request the way KUKAVARPROXY 9.0 does (``strict``: C3 Bridge failures)."""
 
+    #: KVP trims what CrossComm shows (``ExtractVariableValue``); C3 Bridge passes it as is.
+    trim = True
+    #: How a connection turns a whole request frame into a :class:`Request` (KVP's blocks,
+    #: checked; a frame whose blocks do not add up raises ProtocolError and closes it).
+    decode = staticmethod(decode_request)
+
     def __init__(self, store: VariableStore, *, strict: bool = False, ping: bool = True) -> None:
         self.store = store
         self.strict = strict
@@ -154,9 +171,11 @@ class Responder:
         return Reply(msg_id, mode, value if len(value) <= _MAX_VALUE else b"", 0)
 
     def show_var(self, name: str) -> str | None:
-        """basMain ``ShowVar``: the trimmed value, or None where CrossComm raises (unknown)."""
+        """basMain ``ShowVar``: the trimmed value (untrimmed without :attr:`trim`), or None
+        where CrossComm raises (unknown)."""
         try:
-            return extract_variable_value(name, self.store.read(name))
+            text = self.store.read(name)
+            return extract_variable_value(name, text) if self.trim else text
         except UnknownVariable:
             return None
         except Exception:  # a store bug must cost one reply, not the connection

@@ -15,11 +15,17 @@ Replies are written at least every :data:`FLUSH_SIZE` bytes, so at most SEND_LIM
 + one reply wait in the process per connection (an unknown mode after other requests nests the
 previous reply, so one 2048-byte read can answer ~0.5 MB: real KVP does the same).
 
-Without latency or faults a read is answered synchronously inside ``buffer_updated`` and its
-replies leave in one ``transport.write``. Otherwise a worker task serves the read (CrossComm
-calls wait for the global :class:`~kukavarproxy_emu.latency.ServiceQueue`, replies go through the
-faults) while the socket is not read: like the single-threaded proxy, the next read happens only
-after this one was handled, and takes whatever has arrived meanwhile, up to 2048 bytes.
+Without latency or faults a read is answered inside ``buffer_updated`` for up to ``IMMEDIATE``
+seconds, the same work budget as the robust mode (:mod:`kukavarproxy_emu.server`); a read that
+needs longer (hundreds of whole-array reads) is parked where it stopped and continues in the
+emulator's rounds, ``SLICE`` per round and ``ROUND`` for all connections together, so a flooding
+client cannot hold the event loop and other clients are answered in between. VB's parsing is
+unchanged: the parked read resumes at the very statement it stopped at. Otherwise (latency or
+faults) a worker task serves the read (CrossComm calls wait for the global
+:class:`~kukavarproxy_emu.latency.ServiceQueue`, replies go through the faults), yielding to the
+loop once its slice is used up. Either way the socket is not read while a read is served: like
+the single-threaded proxy, the next read happens only after this one was handled, and takes
+whatever has arrived meanwhile, up to 2048 bytes.
 """
 
 from __future__ import annotations
@@ -29,15 +35,15 @@ import logging
 import socket
 import time
 from collections import deque
-from collections.abc import Coroutine
+from collections.abc import Coroutine, Generator
 from dataclasses import dataclass
 from functools import partial
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any
 
 from .faults import send_reply
 from .handler import Responder
 from .kvp9 import READ_SIZE, ReadOutcome, sock_server_read
-from .server import ConnectionInfo
+from .server import IMMEDIATE, SLICE, ConnectionInfo
 
 if TYPE_CHECKING:
     from .server import Emulator
@@ -51,7 +57,6 @@ log = logging.getLogger(__name__)
 SEND_LIMIT = 64 * 1024
 #: The fast path writes its collected replies at the latest when they exceed this many bytes.
 FLUSH_SIZE = 16 * 1024
-_T = TypeVar("_T")
 
 
 @dataclass(frozen=True, slots=True)
@@ -66,14 +71,17 @@ class Kvp9ConnectionInfo(ConnectionInfo):
     most_messages: int = 0
 
 
-def _run_now(coro: Coroutine[Any, Any, _T]) -> _T:
-    """Run a coroutine that never suspends (the fast path's wire) to completion, synchronously."""
-    try:
-        coro.send(None)
-    except StopIteration as done:
-        return done.value  # type: ignore[no-any-return]
-    coro.close()
-    raise RuntimeError("the kvp9 fast path suspended")
+class _Pause:
+    """Awaited by the fast wire once its budget is used up: the parked read's driver
+    (:meth:`Kvp9Connection._resume`) receives it from ``coro.send`` and stops there."""
+
+    def __await__(self) -> Generator[_Pause, None, None]:
+        yield self
+
+
+_PAUSE = _Pause()
+#: A read of the fast path, parked between two slices of work.
+_Read = Coroutine[Any, Any, ReadOutcome]
 
 
 def _show(responder: Responder, name: bytes) -> bytes:
@@ -87,21 +95,35 @@ def _set(responder: Responder, name: bytes, value: bytes) -> bool:
 
 class _FastWire:
     """CrossComm without service time; replies coalesced into few writes (one per read, as a
-    rule; every FLUSH_SIZE bytes when a read answers a lot, so the send limit is checked)."""
+    rule; every FLUSH_SIZE bytes when a read answers a lot, so the send limit is checked).
+    Every CrossComm call and reply first checks the time budget: once ``deadline`` has passed
+    (and something was done since the read was resumed) the read pauses (``_PAUSE``)."""
 
     def __init__(self, conn: Kvp9Connection) -> None:
         self.conn = conn
         self.responder = conn.emu.responder
         self.out: list[bytes] = []
         self.size = 0
+        #: perf_counter time at which the read in progress pauses, and the work done since it
+        #: was (re)started: at least one step per slice, so a read always makes progress.
+        self.deadline = 0.0
+        self.steps = 0
+
+    async def _budget(self) -> None:
+        if self.steps and time.perf_counter() > self.deadline:
+            await _PAUSE
+        self.steps += 1
 
     async def show_var(self, name: bytes) -> bytes:
+        await self._budget()
         return _show(self.responder, name)
 
     async def set_var(self, name: bytes, value: bytes) -> bool:
+        await self._budget()
         return _set(self.responder, name, value)
 
     async def send(self, data: bytes) -> None:
+        await self._budget()
         self.out.append(data)
         self.size += len(data)
         if self.size > FLUSH_SIZE:
@@ -118,10 +140,12 @@ class _FastWire:
 
 
 class _SlowWire:
-    """CrossComm through the latency queue; each reply written at once, through the faults."""
+    """CrossComm through the latency queue; each reply written at once, through the faults;
+    without latency (faults only) the worker yields to the loop every ``SLICE`` seconds."""
 
     def __init__(self, conn: Kvp9Connection) -> None:
         self.conn = conn
+        self.deadline = 0.0
 
     async def show_var(self, name: bytes) -> bytes:
         emu = self.conn.emu
@@ -141,6 +165,9 @@ class _SlowWire:
         return await emu.service.run("write", call) if emu.service else call()
 
     async def send(self, data: bytes) -> None:
+        if time.perf_counter() > self.deadline:
+            await asyncio.sleep(0)  # the others' turn (with latency, CrossComm waits anyway)
+            self.deadline = time.perf_counter() + SLICE
         conn = self.conn
         conn.replies += 1
         conn.emu.stats.requests += 1
@@ -172,6 +199,10 @@ class Kvp9Connection(asyncio.BufferedProtocol):
         self.most_messages = 0
         self.worker: asyncio.Task[None] | None = None
         self._backlog: deque[bytes] = deque()  # at most one read: reading pauses meanwhile
+        #: The fast path's read in progress, parked until the emulator's next round.
+        self._parked: _Read | None = None
+        #: Waiting in the emulator's round (``Emulator._enqueue``).
+        self._scheduled = False
         self._close_after_work = False
         self._reading_paused = False
         self._rbuf = memoryview(bytearray(READ_SIZE))
@@ -199,6 +230,8 @@ class Kvp9Connection(asyncio.BufferedProtocol):
         log.info("client %d connected from %s (wire kvp9)", self.index, self.peer)
 
     def connection_lost(self, exc: Exception | None) -> None:
+        # a parked read is finished all the same (its writes apply, as VB's loop goes on after
+        # a failed Write), its replies go nowhere
         self.closed = True
         if self.index:
             self.emu._forget(self)
@@ -219,38 +252,79 @@ class Kvp9Connection(asyncio.BufferedProtocol):
         robot = self.emu.robot
         if robot is not None:
             robot.clock.poll()  # a due IPO tick goes before this read (bounded jitter)
-        if self.worker is None and not self.emu.slow:
-            self._serve_now(data)
+        if self.worker is None and self._parked is None and not self.emu.slow:
+            self._start(data)
             return
-        self._backlog.append(data)
+        self._backlog.append(data)  # served after the read in progress (parked or worker)
         self._set_reading(False)
-        if self.worker is None:
+        if self.worker is None and self._parked is None:
             self.worker = asyncio.get_running_loop().create_task(self._work())
 
     def eof_received(self) -> bool:
         # KVP drops the client in its Disconnect event, after the reads before it were served.
-        if self.worker is not None:
+        if self.worker is not None or self._parked is not None:
             self._close_after_work = True
             return True
         return False
 
     # -- serving reads --------------------------------------------------------------------
 
-    def _serve_now(self, data: bytes) -> None:
+    def _start(self, data: bytes) -> None:
+        """Serve one read on the fast path: at once for up to ``IMMEDIATE`` seconds, the rest
+        (if any) in the emulator's rounds."""
+        wire = self._fast
+        wire.deadline = time.perf_counter() + IMMEDIATE
+        wire.steps = 0
+        self._resume(sock_server_read(data, wire, ping=self._ping, legacy_ids=self.emu.legacy_ids))
+
+    def _serve(self, budget: float) -> None:
+        """The emulator's round: continue the parked read for ``budget`` seconds (one step
+        at least)."""
+        read = self._parked
+        if read is None:
+            return
+        self._fast.deadline = time.perf_counter() + budget
+        self._fast.steps = 0
+        self._resume(read)
+
+    def _resume(self, read: _Read) -> None:
         wire = self._fast
         try:
-            outcome = _run_now(
-                sock_server_read(data, wire, ping=self._ping, legacy_ids=self.emu.legacy_ids)
-            )
+            read.send(None)  # runs until the read ends (StopIteration) or its budget is used up
+        except StopIteration as done:
+            self._parked = None
+            self._account(done.value)
+            wire.flush()
+            self._next_read()
+            return
         except Exception:
+            self._parked = None
             wire.out.clear()
             log.exception("client %d (%s): internal error, closing", self.index, self.peer)
             self.abort()
             return
-        self._account(outcome)
+        self._parked = read  # paused: what it answered so far goes out now
         wire.flush()
+        self._set_reading(False)
+        self.emu._enqueue(self)
+
+    def _next_read(self) -> None:
+        """After a fast-path read: a read that arrived meanwhile, the close owed, or reading."""
+        if self._backlog and not self.closed:
+            self._start(self._backlog.popleft())
+        elif self._close_after_work and self.transport is not None:
+            self.transport.close()
+        else:
+            self._set_reading(True)
+
+    def _unpark(self) -> None:
+        read, self._parked = self._parked, None
+        if read is not None:
+            read.close()
+            self._fast.out.clear()
 
     async def _work(self) -> None:
+        self._slow.deadline = time.perf_counter() + SLICE
         try:
             while self._backlog and not self.closed:
                 data = self._backlog.popleft()
@@ -304,6 +378,7 @@ class Kvp9Connection(asyncio.BufferedProtocol):
 
     def close(self) -> None:
         self.closed = True
+        self._unpark()
         if self.transport is None:
             return
         if self.worker is None:
@@ -317,10 +392,12 @@ class Kvp9Connection(asyncio.BufferedProtocol):
         reworked robust connection uses for this)."""
         self.closed = True
         self._backlog.clear()
+        parked = self._parked is not None
+        self._unpark()
         transport = self.transport
         if transport is None:
             return
-        if transport.get_write_buffer_size() or self.worker is not None:
+        if transport.get_write_buffer_size() or self.worker is not None or parked:
             transport.abort()
         else:
             transport.close()
@@ -337,7 +414,7 @@ class Kvp9Connection(asyncio.BufferedProtocol):
             peer=self.peer,
             received=self.replies,
             buffered=0,  # nothing survives a read
-            pending=len(self._backlog),
+            pending=len(self._backlog) + (self._parked is not None),
             write_buffer=transport.get_write_buffer_size() if transport else 0,
             reading_paused=self._reading_paused,
             reads=self.reads,

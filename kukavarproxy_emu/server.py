@@ -46,14 +46,13 @@ from pyopenshowvar.protocol import (
     Reply,
     Request,
     RequestDecoder,
-    decode_request,
     encode_reply,
 )
 
 from .config import EmulatorConfig
 from .discovery import DiscoveryProtocol, start_discovery
 from .faults import FaultSet, send_reply
-from .handler import Responder, build_store
+from .handler import Deferred, Responder, build_store
 from .latency import ServiceQueue
 from .logsafe import RateLimitedLog, clip
 from .store import VariableStore
@@ -266,7 +265,7 @@ class _Connection(asyncio.BufferedProtocol):
             return
         for frame in frames:
             try:
-                request = decode_request(frame)
+                request = self.responder.decode(frame)
             except ProtocolError as exc:
                 self._protocol_error(exc)
                 error = exc
@@ -287,16 +286,18 @@ class _Connection(asyncio.BufferedProtocol):
         beyond one read)."""
         transport = self.transport
         backlog = self.backlog
-        if transport is None or self.lost or self._write_paused:
-            return
+        if transport is None or self.lost or self._write_paused or self.worker is not None:
+            return  # a deferred answer is pending (_deferred): what follows it waits
         emu = self.emu
         if emu.robot is not None:
             emu.robot.clock.poll()
         answer = self.responder.answer
+        decode = self.responder.decode
         room = OUTPUT_LIMIT - transport.get_write_buffer_size()
         deadline = time.perf_counter() + budget
         out: list[bytes] = []
         size = 0
+        deferred: Deferred | None = None
         try:
             while backlog and (size < room or not out):
                 item = backlog[0]
@@ -304,12 +305,16 @@ class _Connection(asyncio.BufferedProtocol):
                     break
                 backlog.popleft()
                 if isinstance(item, tuple):
-                    request = decode_request(item[0])
+                    request = decode(item[0])
                     msg_id = item[1]
                 else:
-                    request = decode_request(item)
+                    request = decode(item)
                     msg_id = request.msg_id
-                reply = encode_reply(answer(request, msg_id))
+                try:
+                    reply = encode_reply(answer(request, msg_id))
+                except Deferred as later:  # its answer is sent by a task, the rest after it
+                    deferred = later
+                    break
                 out.append(reply)
                 size += len(reply)
                 if time.perf_counter() > deadline:
@@ -326,12 +331,42 @@ class _Connection(asyncio.BufferedProtocol):
             self.received += len(out)
             emu.stats.requests += len(out)
             transport.write(out[0] if len(out) == 1 else b"".join(out))
+        if deferred is not None:
+            self.worker = asyncio.get_running_loop().create_task(self._deferred(deferred))
+            self._update_reading()
+            return
         if backlog and backlog[0] is None:
             backlog.clear()
             self._finish()
             return
         if backlog and not self._write_paused:
             emu._enqueue(self)
+        self._update_reading()
+
+    async def _deferred(self, later: Deferred) -> None:
+        """Send a deferred answer once it is ready, then go on with what waited behind it:
+        the rest of the backlog, then what arrived meanwhile (queued, see ``_dispatch``)."""
+        try:
+            reply = encode_reply(await later.reply())
+        except asyncio.CancelledError:
+            raise
+        except Exception:
+            log.exception("client %d (%s): internal error, closing", self.index, self.peer)
+            self.worker = None
+            self.abort()
+            return
+        self.worker = None
+        transport = self.transport
+        if transport is None or self.lost:
+            return
+        self.received += 1
+        self.emu.stats.requests += 1
+        if not transport.is_closing():
+            transport.write(reply)
+        if self.backlog:
+            self._serve(IMMEDIATE)
+        elif self.queue:
+            self.worker = asyncio.get_running_loop().create_task(self._work())
         self._update_reading()
 
     def _answer(self, request: Request, msg_id: int) -> Reply:
@@ -357,13 +392,16 @@ class _Connection(asyncio.BufferedProtocol):
                 request, msg_id, nth, arrival = item
                 responder = self.responder
                 kind = responder.kind(request)
-                if emu.service is not None and kind is not None:
-                    compute = partial(self._answer, request, msg_id)
-                    reply = await emu.service.run(
-                        kind, compute, responder.weight(request), arrival=arrival
-                    )
-                else:
-                    reply = self._answer(request, msg_id)
+                try:
+                    if emu.service is not None and kind is not None:
+                        compute = partial(self._answer, request, msg_id)
+                        reply = await emu.service.run(
+                            kind, compute, responder.weight(request), arrival=arrival
+                        )
+                    else:
+                        reply = self._answer(request, msg_id)
+                except Deferred as later:  # after its service time, the work in slices
+                    reply = await later.reply()
                 frame = encode_reply(reply)
                 emu.stats.requests += 1
                 faults = emu.faults.match(self.index, nth) if emu.faults else []
@@ -491,7 +529,7 @@ class Emulator:
         self._server: asyncio.Server | None = None
         self._connections: dict[int, _Connection | Kvp9Connection] = {}
         #: Connections with requests left to answer, served in rounds (see ROUND).
-        self._ready: deque[_Connection] = deque()
+        self._ready: deque[_Connection | Kvp9Connection] = deque()
         self._round_pending = False
         self._last_index = 0
         self._idle_task: asyncio.Task[None] | None = None
@@ -710,7 +748,7 @@ class Emulator:
         self.stats.clients = len(self._connections)
         return True
 
-    def _enqueue(self, conn: _Connection) -> None:
+    def _enqueue(self, conn: _Connection | Kvp9Connection) -> None:
         """Serve ``conn``'s backlog in the next round (once per round, in arrival order)."""
         if conn._scheduled:
             return

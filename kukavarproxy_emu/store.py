@@ -205,12 +205,19 @@ class VariableStore:
         self._text.pop(key, None)
         self._bump(key)
 
-    def load_dat(self, dat: DatFile | str, *, all_global: bool | None = None) -> list[str]:
+    def load_dat(
+        self,
+        dat: DatFile | str,
+        *,
+        all_global: bool | None = None,
+        checkpoint: Callable[[], None] | None = None,
+    ) -> list[str]:
         """Declare the globals of a data list (text or parsed); returns the names declared.
 
         In ``$CONFIG.DAT`` (or a list without DEFDAT) every declaration is global; elsewhere
         only ``DECL GLOBAL`` ones in a ``PUBLIC`` list. A later data list may redeclare a user
         global (your own $CONFIG.DAT replaces the bundled one), never a system variable.
+        ``checkpoint`` is called before every declaration (a long list lets other work in).
         """
         if isinstance(dat, str):
             dat = parse_dat(dat)
@@ -230,6 +237,8 @@ class VariableStore:
         for decl in dat.declarations:
             if not (all_global or (decl.is_global and dat.public)):
                 continue
+            if checkpoint is not None:
+                checkpoint()
             try:
                 self.declare(
                     decl.name, decl.type_name, decl.dims, decl.init, decl.is_const, replace=True

@@ -169,6 +169,7 @@ class Connection(LinkBase[_Fut]):
     def _expire(self, p: Pending[_Fut]) -> None:
         if not p.waiter.done():
             p.abandoned = True
+            self._slot.set()  # one request in flight (legacy ids): the next may go now
             _fail(
                 p.waiter,
                 KvpTimeoutError(

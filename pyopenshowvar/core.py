@@ -51,6 +51,9 @@ P = ParamSpec("P")
 T = TypeVar("T")
 
 _READ_FRAMES_MAX = 256
+#: The two bytes before the status byte of a C3 Bridge failure: error code 0, ErrorGeneral.
+#: KUKAVARPROXY's failure tail is the status block ``00 01``, so the two never meet.
+C3_GENERAL_FAILURE = b"\x00\x00"
 
 #: A call an operation asks its client to make: (method name, positional args, keyword args).
 Call = tuple[str, tuple[Any, ...], dict[str, Any]]
@@ -156,6 +159,12 @@ class ClientCore:
             if reply.mode is None:
                 raise ReadFailedError(
                     "proxy does not support this request mode", name=name, endpoint=self.endpoint
+                )
+            if reply.code == C3_GENERAL_FAILURE:
+                # C3 Bridge's answer for a name CrossComm cannot show (KVP's is an empty
+                # success); the same outcome as read_multiple's per-name ErrorGeneral
+                raise UnknownVariableError(
+                    "unknown or unreadable variable", name=name, endpoint=self.endpoint
                 )
             raise ReadFailedError("read failed", name=name, endpoint=self.endpoint)
         if not reply.value:

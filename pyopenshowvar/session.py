@@ -10,16 +10,23 @@ The guarantee is that a reply is never handed to a request it does not answer:
   waiting for — an unsolicited or duplicated reply, a reply for a request already failed as
   dropped, a reply on an idle connection — is a protocol error: the connection is dropped and
   every pending call fails loudly. It is never taken as a value.
-* **In order** only for a proxy *proven* to have the pre-9.0 id bug (every reply to one socket
-  read carries the id of the first request of that read). Under ``id_policy="auto"`` the proof
-  is a probe sent as soon as a connection opens, while it is quiet: two reads of ``$OV_PRO`` in
-  one segment, whose replies nobody waits for (connecting costs no round trip). Both answered
-  with their own ids: the proxy echoes ids, and by-id matching stays for the connection's life.
-  The second answered with the first's id: the bug is proven. Until then ids are matched
-  strictly. Even on a proven legacy proxy only a reply
-  that repeats the id of the reply just before it (the batch's label) is matched to the oldest
-  request, and what can be checked is checked: the reply's mode against the request's, a write's
-  echo against the value sent, and a read's value shape against what that variable read before.
+* **One request in flight** until the proxy is proven to echo ids, and for the whole life of a
+  connection to a proxy with the pre-9.0 id bug (every reply to one socket read carries the id
+  of the first request of that read). Under ``id_policy="auto"`` the proof is a probe sent as
+  soon as a connection opens, while it is quiet: two reads of ``$OV_PRO`` in one segment, whose
+  replies nobody waits for. Both answered with their own ids: the proxy echoes ids, and
+  pipelining with by-id matching holds for the connection's life. The second answered with the
+  first's id: the bug is proven, and requests keep going out one at a time (a ``read_many`` is
+  a round trip per name). With one request awaited at a time no reply can be misdelivered: a
+  reply with its id answers it; a reply that repeats the previous reply's id (the label of a
+  read that also held requests abandoned after a timeout) is matched in order, and in order
+  the only request it can land on that anyone awaits is the newest one sent, which is its own
+  — a lost reply shifts the later ones onto abandoned requests, whose replies are discarded,
+  never onto a request someone waits for. (Pipelining on such a proxy cannot be made safe: a
+  reply lost in the middle of a read shifts every later reply of that read onto the wrong
+  request, and two variables of the same type cannot be told apart.) What can be checked is
+  checked on top: the reply's mode against the request's, a write's echo against the value
+  sent, and a read's value shape against what that variable read before.
 * ``id_policy="strict"`` declares ids echoed without a probe; ``"legacy"`` declares the bug.
 
 The in-flight window is bounded by a request count and by the bytes of unanswered requests:
@@ -199,12 +206,22 @@ class Session(Generic[W]):
     def fits(self, size: int) -> bool:
         if not self.queue:
             return True  # a lone request always goes (check_size bounded it)
+        if self.ids != "echoed" and self._awaited():
+            return False  # one request in flight until ids are proven echoed (module doc)
+        return self._room(size)
+
+    def _room(self, size: int) -> bool:
         return len(self.queue) < self.max_in_flight and self.bytes_in_flight + size <= self.window
+
+    def _awaited(self) -> bool:
+        """A request someone still waits for is pending (not only abandoned ones)."""
+        return any(not p.abandoned for p in self.queue)
 
     def stalled(self, size: int, now: float) -> bool:
         """No room, and the oldest request waits for longer than its timeout: the server has
-        stopped answering (its requests timed out and fill the window)."""
-        if not self.queue or self.fits(size):
+        stopped answering (its requests timed out and fill the window). Waiting for the one
+        request in flight of a legacy proxy is not a stall: its caller's timeout bounds it."""
+        if not self.queue or self._room(size):
             return False
         head = self.queue[0]
         return now - head.sent_at > head.timeout
@@ -318,12 +335,18 @@ class Session(Generic[W]):
         if repeats and self.ids == "unknown" and self._probe is not None and head is self._probe[1]:
             self.ids = "legacy"
             log.warning(
-                "%s repeats the first message id of a batch (pre-9.0 KUKAVARPROXY): matching"
-                " replies in order, with mode, echo and value-shape checks",
+                "%s repeats the first message id of a batch (pre-9.0 KUKAVARPROXY): sending"
+                " one request at a time, since pipelined replies cannot be told apart",
                 self.endpoint,
             )
         if repeats and self.ids == "legacy":
             assert head is not None
+            if not head.abandoned and any(not p.abandoned for p in list(self.queue)[1:]):
+                # cannot happen with one request awaited at a time; never guess if it does
+                raise ProtocolError(
+                    f"reply with id {reply.msg_id} repeats its batch's id, and more than one"
+                    " request awaits a reply: it cannot be told whose it is"
+                )
             self.mislabeled_replies += 1
             return head
         why = (

@@ -93,6 +93,12 @@ async def test_detection_and_variables(c3: Emulator) -> None:
         assert await kvp.read_utf16("$OV_PRO") == "40"
         with pytest.raises(UnknownVariableError):
             await kvp.read_utf16("NOPE")
+        with pytest.raises(UnknownVariableError):  # #0 as #4 and #6: one outcome for one fact
+            await kvp.read("NOPE")
+        with pytest.raises(UnknownVariableError):
+            await kvp.read_value("NOPE")
+        assert isinstance((await kvp.read_many(["NOPE"]))["NOPE"].error, UnknownVariableError)
+        assert (await kvp.read("$TORQUE_AXIS_ACT[]")).endswith(" ")  # C3 does not trim
         back = await kvp.write_multiple([("$OV_PRO", 55), ("$OV_JOG", "75")])
         assert (back["$OV_PRO"].text, back["$OV_JOG"].text) == ("55", "75")
         with pytest.raises(WriteRefusedError, match=r"1 of 2 writes refused.*AXIS_ACT") as err:
@@ -198,7 +204,30 @@ async def test_select_errors_are_explained(c3: Emulator) -> None:
         with pytest.raises(C3CommandError):
             await kvp.program_select("/R1/NOT_THERE")
         await kvp.program_run("/R1/FOLLOW", allow_motion=True)  # a shipped program: runs
-        assert (await kvp.program_state()).running
+        state = await kvp.program_state()
+        assert state.running and state.message == ""  # the failed select's reason is gone
+
+
+async def test_a_refusal_message_is_cleared_by_a_later_successful_start(c3: Emulator) -> None:
+    async with Client(c3.host, c3.port) as kvp:
+        path = await kvp.program_upload(b"DEF QUICK()\nEND\n", "quick.src")
+        with pytest.raises(C3CommandError):
+            await kvp.program_start(allow_motion=True)  # nothing selected yet
+        assert "no program selected" in ((await kvp.program_state()).message or "")
+        await kvp.program_select(path)
+        assert (await kvp.program_state()).message == ""
+        await kvp.program_start(allow_motion=True)
+        await wait_for(lambda: _state_is(kvp, "P_END"))
+        with pytest.raises(C3CommandError):
+            await kvp.program_start(allow_motion=True)  # ended: reset first
+        assert "reset it first" in ((await kvp.program_state()).message or "")
+        await kvp.program_reset()
+        await kvp.program_start(allow_motion=True)
+        assert (await kvp.program_state()).message == ""
+
+
+async def _state_is(kvp: Client, state: str) -> bool:
+    return (await kvp.program_state()).state == state
 
 
 async def test_manual_motion_and_files(c3: Emulator) -> None:
@@ -285,6 +314,8 @@ def test_the_blocking_client_runs_the_same_c3_operations() -> None:
     with EmulatorThread(config) as emu, SyncClient(emu.host, emu.port) as kvp:
         assert kvp.server_info().describe() == "C3 Bridge 1.4 (OPEN SOURCE)"
         assert kvp.read_multiple(["$OV_PRO", "PING"])["PING"].text == "PONG"
+        with pytest.raises(UnknownVariableError):
+            kvp.read("NOPE")  # the fast path hands a failure over to the same check
         path = kvp.program_upload(SRC, "pick.src", DAT)
         kvp.program_select(path)
         with pytest.raises(MotionNotAllowedError):

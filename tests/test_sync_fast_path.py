@@ -8,10 +8,18 @@ exactly as before. Each test drives one such case through a deliberately odd ser
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Callable
+from typing import Any
 
 import pytest
 
-from pyopenshowvar import KvpConnectionError, KvpTimeoutError, sync
+from pyopenshowvar import (
+    KvpConnectionError,
+    KvpTimeoutError,
+    ReadFailedError,
+    UnknownVariableError,
+    sync,
+)
 from pyopenshowvar.protocol import Mode, Reply, Request, encode_reply
 from pyopenshowvar.testing import FakeProxy, answer
 
@@ -74,3 +82,129 @@ def test_timeout_on_the_fast_path_keeps_the_connection_in_step() -> None:
         assert kvp.read("NEXT", timeout=2.0) == "v:NEXT"
         assert kvp.read("AGAIN") == "v:AGAIN"  # idle again: the fast path once more
         assert kvp.connection is not None and kvp.connection.in_flight == 0
+
+
+# ---------------------------------------------------------------------------------------------
+# A deliberately broken proxy against the fast path (mutation audit: every rule of read_text
+# and _finish_idle that decides "this reply is the value" has a test that fails without it).
+
+
+def _serve(replies: dict[str, bytes]) -> Callable[[Request, asyncio.StreamWriter, int], Any]:
+    """A handler answering ``name`` with ``replies[name]`` (frame bytes, id patched to the
+    request's), everything else correctly."""
+
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        frame = replies.get(req.name)
+        w.write(answer(req) if frame is None else req.msg_id.to_bytes(2, "big") + frame[2:])
+
+    return handler
+
+
+def _reply(value: bytes, status: int = 1, mode: int | None = Mode.READ) -> bytes:
+    return encode_reply(Reply(0, mode, value, status))
+
+
+@pytest.mark.parametrize("twice", [False, True], ids=["first read", "prefix known"])
+def test_a_failed_read_that_carries_a_value_is_never_its_text(twice: bool) -> None:
+    replies = {"$AXIS_ACT": _reply(b"{E6AXIS: A1 1.0}", status=0)}
+    with FakeProxy(_serve(replies)) as port, sync.Client(port=port, timeout=1.0) as kvp:
+        if twice:  # the shape is known: the prefix path would accept "{E6AXIS:" at once
+            replies.pop("$AXIS_ACT")
+            kvp.read("$AXIS_ACT")
+            replies["$AXIS_ACT"] = _reply(b"{E6AXIS: A1 1.0}", status=0)
+        with pytest.raises(ReadFailedError):
+            kvp.read("$AXIS_ACT")
+        res = kvp.read_many(["$AXIS_ACT", "OK"])
+        assert not res["$AXIS_ACT"].ok and isinstance(res["$AXIS_ACT"].error, ReadFailedError)
+        assert res["OK"].text == "v:OK"
+        assert kvp.connected  # a failure status is an answer, not a protocol error
+
+
+def test_an_empty_value_is_unknown_not_an_empty_text() -> None:
+    replies = {"NOPE": _reply(b""), "MODELESS": encode_reply(Reply(0, None))}
+    with FakeProxy(_serve(replies)) as port, sync.Client(port=port, timeout=1.0) as kvp:
+        with pytest.raises(UnknownVariableError):
+            kvp.read("NOPE")
+        assert kvp.read("NEXT") == "v:NEXT" and kvp.connected
+        with pytest.raises(KvpConnectionError, match="has no mode"):  # KVP's unknown-mode answer
+            kvp.read("MODELESS")  # to a read: it cannot be KVP 9.0's answer to this request
+
+
+@pytest.mark.parametrize(
+    "frame",
+    [
+        _reply(b"v:BAD")[:-1],  # the status byte missing: L says one more byte
+        bytes.fromhex("0000 000A 00 0009") + b"v:BAD" + bytes.fromhex("0001 01"),  # V too big
+        bytes.fromhex("0000 000C 00 0003") + b"v:BAD" + bytes.fromhex("0001 01"),  # V too small
+        bytes.fromhex("0000 000B 01 0005") + b"v:BAD" + bytes.fromhex("0001 01"),  # mode 1
+        # L agrees with the bytes sent, V does not (the fast path must check V too)
+        bytes.fromhex("0000 000B 00 0003") + b"v:BAD" + bytes.fromhex("0001 01"),
+        bytes.fromhex("0000 000B 00 0004") + b"v:BAD" + bytes.fromhex("0001 01"),
+    ],
+    ids=["cut", "value-length-over", "value-length-under", "write-mode", "v-3", "v-4"],
+)
+def test_a_malformed_or_mismatched_reply_is_never_a_value(frame: bytes) -> None:
+    with (
+        FakeProxy(_serve({"BAD": frame})) as port,
+        sync.Client(port=port, timeout=0.3) as kvp,
+    ):
+        assert kvp.read("GOOD") == "v:GOOD"
+        with pytest.raises((KvpConnectionError, KvpTimeoutError)):
+            kvp.read("BAD")
+
+
+def test_a_reply_in_two_pieces_and_two_replies_in_one_segment() -> None:
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        reply = answer(req)
+        if req.name == "CUT":  # the head alone, then the rest
+            w.write(reply[:4])
+            await w.drain()
+            await asyncio.sleep(0.02)
+            w.write(reply[4:])
+        elif req.name == "EXTRA":  # the reply and an answer to nothing, in one segment
+            w.write(reply + encode_reply(Reply(0x7777, Mode.READ, b"v:EVIL")))
+        else:
+            w.write(reply)
+
+    with FakeProxy(handler) as port, sync.Client(port=port, timeout=1.0) as kvp:
+        assert kvp.read("CUT") == "v:CUT"
+        assert kvp.read("CUT") == "v:CUT"
+        assert kvp.stats.count == 2
+        assert kvp.read("EXTRA") == "v:EXTRA"  # its own reply, proven by its id
+        assert not kvp.connected  # the reply to nothing dropped the connection loudly
+        with pytest.raises(KvpConnectionError, match="answers no request"):
+            kvp.read("NEXT")
+
+
+def test_message_ids_wrap_from_65535_to_0_on_the_fast_paths() -> None:
+    seen: list[int] = []
+
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        seen.append(req.msg_id)
+        w.write(answer(req))
+
+    with FakeProxy(handler) as port, sync.Client(port=port, timeout=1.0) as kvp:
+        assert kvp.read("A") == "v:A"  # after the id probe (ids 0 and 1)
+        assert kvp.connection is not None
+        kvp.connection.session.next_id = 0xFFFE
+        assert [kvp.read(n) for n in ("B", "C", "D")] == ["v:B", "v:C", "v:D"]
+        assert kvp.write("E", "5") == "5"  # the write takes the idle path too
+        assert kvp.read("F") == "v:F"
+        assert kvp.write("G", "6") == "6"
+        assert kvp.read("H") == "v:H"
+        assert seen[-7:] == [0xFFFE, 0xFFFF, 0, 1, 2, 3, 4]
+        assert kvp.connection.in_flight == 0
+
+
+def test_a_reply_with_the_previous_id_after_a_timeout_is_not_the_next_value() -> None:
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        if req.name == "SLOW":
+            await asyncio.sleep(0.2)
+        w.write(answer(req))
+
+    with FakeProxy(handler) as port, sync.Client(port=port, timeout=0.05) as kvp:
+        with pytest.raises(KvpTimeoutError):
+            kvp.read("SLOW")
+        # SLOW's late reply arrives first; the fast path must not take it as FAST's value
+        assert kvp.read("FAST", timeout=1.0) == "v:FAST"
+        assert kvp.write("W", "1", timeout=1.0) == "1"

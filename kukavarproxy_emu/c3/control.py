@@ -4,8 +4,10 @@ on the emulator's simulated robot.
 Selecting a module parses its ``.src`` (and the ``.dat`` beside it) from the virtual file system
 and hands it to the robot interpreter exactly as ``--program`` does
 (:class:`~kukavarproxy_emu.krl.executor.KrlProgram`): same parser, same data list declared into
-the store, same ``$PRO_STATE1``/``$PRO_NAME1[]``/``$STOPMESS``/``$EMU_MESSAGE[]``. The states
-follow the KRC's robot interpreter:
+the store, same ``$PRO_STATE1``/``$PRO_NAME1[]``/``$STOPMESS``/``$EMU_MESSAGE[]``. Parsing and
+declaring run in slices between other clients' requests (:meth:`RobotControl.select`); selects,
+starts, motions and keys that come meanwhile wait for it. The states follow the KRC's robot
+interpreter:
 
 =========  ==========================================================================
 P_FREE     nothing selected; select (5) or run (6) a module
@@ -24,8 +26,11 @@ for select errors (a KRL syntax error names ``file:line:column``).
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import time
+from collections.abc import Awaitable, Callable
+from functools import partial
 from typing import TYPE_CHECKING
 
 from pyopenshowvar.c3.constants import ErrorCode, Interpreter, KcpKey, MotionType, ProgramCommand
@@ -39,17 +44,19 @@ from ..krl.parser import KrlSyntaxError, parse_dat, parse_src
 from ..krl.runtime import KrlRuntimeError
 from ..motion.kernel import MotionRefused
 from ..motion.programs import Idle
+from ..slices import Checkpoint, run_sliced
 from .vfs import VfsError, VirtualFS
 
 if TYPE_CHECKING:
     from ..motion import Robot
+    from ..store import VariableStore
 
 __all__ = ["MAX_MODULE", "RobotControl"]
 
 log = logging.getLogger(__name__)
 
-#: Largest module (``.src`` + ``.dat``) the emulator selects: parsing takes ~10 µs a byte,
-#: and selecting blocks the one thread, as it does on C3 Bridge.
+#: Largest module (``.src`` + ``.dat``) the emulator selects: parsing takes ~3 µs a byte,
+#: spread over loop iterations (a 64 KiB module is about 0.2 s of work).
 MAX_MODULE = 64 * 1024
 #: Seconds one #11 motion may spend planning (a long LIN near a singularity takes longest).
 PLAN_BUDGET = 0.25
@@ -60,6 +67,23 @@ _MOTION_KIND = {
     MotionType.PTP_REL: "PTP_REL",
     MotionType.LIN_REL: "LIN_REL",
 }
+
+
+def _load_module(
+    src: tuple[str, str],
+    dat: tuple[str, str] | None,
+    store: VariableStore,
+    checkpoint: Checkpoint,
+) -> KrlProgram:
+    """Parse a module (``(path, text)`` of its ``.src`` and ``.dat``) and declare its data
+    list, calling ``checkpoint`` all along: the sliced part of a select."""
+    module = parse_src(src[1], src[0], checkpoint=checkpoint)
+    if not module.routines:
+        raise KrlSyntaxError("no DEF in the file", filename=src[0], line=1, column=1, text="")
+    if dat is not None:
+        parsed = parse_dat(dat[1], dat[0], checkpoint=checkpoint)
+        module = ast.Module(module.filename, module.routines, parsed, line=1, column=1)
+    return KrlProgram(module, store, checkpoint=checkpoint)
 
 
 class _Planner(MotionMixin):
@@ -74,6 +98,9 @@ class RobotControl:
         self.vfs = vfs
         #: The KRC path of the selected module's ``.src`` ("" when none was selected by C3).
         self.selected = ""
+        #: Set while a select parses and loads its module, done when it has ended.
+        self._loading: asyncio.Future[None] | None = None
+        self._select_task: asyncio.Task[int] | None = None
 
     # ------------------------------------------------------------------ state
 
@@ -91,16 +118,11 @@ class RobotControl:
 
     # ------------------------------------------------------------------ #10
 
-    def program(self, command: int, interpreter: int, name: str = "", force: bool = False) -> int:
-        """Run one #10 command; returns the error code to answer with."""
+    def program(self, command: int, interpreter: int) -> int:
+        """Run one #10 command other than select and run; returns the error code to answer."""
         if self.robot is None:
             return ErrorCode.NO_INTERFACE
         try:
-            if command == ProgramCommand.SELECT:
-                return self._select(name)
-            if command == ProgramCommand.RUN:
-                code = self._select(name)
-                return code if code != ErrorCode.SUCCESS else self._start()
             if command not in (1, 2, 3, 4):
                 return ErrorCode.NOT_IMPLEMENTED
             if interpreter == Interpreter.SUBMIT:
@@ -112,9 +134,18 @@ class RobotControl:
             self.robot.fault(str(exc))
             return ErrorCode.GENERAL
 
-    def _select(self, name: str) -> int:
+    def select(self, name: str, *, run: bool = False) -> int | Callable[[], Awaitable[int]]:
+        """#10 select (5) or run (6): the error code at once when refused, else the rest of
+        the select to await — parsing the module and declaring its data list a few ms per
+        event-loop iteration (:func:`~kukavarproxy_emu.slices.run_sliced`), then making it the
+        robot's program — whose result is the code. Meanwhile other selects, starts, motions
+        and keys wait for it (:meth:`after_select`), as they would behind C3 Bridge's one
+        thread."""
         robot = self.robot
-        assert robot is not None
+        if robot is None:
+            return ErrorCode.NO_INTERFACE
+        if self.selecting:
+            return partial(self.after_select, partial(self.select, name, run=run))
         if self._state() == "P_ACTIVE" or not self._standstill():
             self._message("select refused: stop the running program first")
             return ErrorCode.GENERAL
@@ -131,28 +162,66 @@ class RobotControl:
                 f"select {name}: module of {size} bytes, the emulator selects {MAX_MODULE}"
             )
             return ErrorCode.MEMORY
-        try:
-            module = parse_src(src.data.decode("latin-1"), src.path)
-            if not module.routines:
-                raise KrlSyntaxError(
-                    "no DEF in the file", filename=src.path, line=1, column=1, text=""
-                )
-            if dat is not None:
-                parsed = parse_dat(dat.data.decode("latin-1"), dat.path)
-                module = ast.Module(module.filename, module.routines, parsed, line=1, column=1)
-            program = KrlProgram(module, robot.store)
-        except (KrlSyntaxError, ValueError) as exc:
-            self._message(str(exc).splitlines()[0])
+        load = partial(
+            _load_module,
+            (src.path, src.data.decode("latin-1")),
+            (dat.path, dat.data.decode("latin-1")) if dat is not None else None,
+            robot.store,
+        )
+        loop = asyncio.get_running_loop()
+        loaded = self._loading = loop.create_future()
+
+        async def finish() -> int:
+            try:
+                program = await run_sliced(load)
+            except (KrlSyntaxError, ValueError) as exc:
+                self._message(str(exc).splitlines()[0])
+                return ErrorCode.GENERAL
+            finally:
+                self._loading = None
+                loaded.set_result(None)  # its waiters run after the select is complete
+            code = self._selected(program, src.path)
+            if code == ErrorCode.SUCCESS and run:
+                try:
+                    code = self._start()
+                except (MotionRefused, KrlRuntimeError) as exc:
+                    robot.fault(str(exc))
+                    code = ErrorCode.GENERAL
+            return code
+
+        # A task of its own: the select completes even if its client goes away at once (as
+        # the server's COM call does), and the waiters behind it are always released.
+        self._select_task = loop.create_task(finish())
+        return partial(asyncio.shield, self._select_task)
+
+    @property
+    def selecting(self) -> bool:
+        """A select is parsing and loading its module (see :meth:`select`)."""
+        return self._loading is not None
+
+    async def after_select(self, action: Callable[[], int | Callable[[], Awaitable[int]]]) -> int:
+        """The code of ``action()``, run once no select is loading any more."""
+        while self._loading is not None:
+            await asyncio.shield(self._loading)  # a waiter that goes away cancels only itself
+        result = action()
+        return result if isinstance(result, int) else await result()
+
+    def _selected(self, program: KrlProgram, path: str) -> int:
+        """Make ``program`` (parsed and loaded) the robot's program."""
+        robot = self.robot
+        assert robot is not None
+        if self._state() == "P_ACTIVE" or not self._standstill():  # starts and motions wait
+            self._message("select refused: stop the running program first")  # for selects
             return ErrorCode.GENERAL
         robot.kernel.stop(hard=True)
         robot.kernel.hold = False
         robot.running = False
         robot.program = program
-        self.selected = src.path
+        self.selected = path
         self._set("$PRO_NAME1[]", program.krl_name)
         self._set("$PRO_STATE1", KrlEnum("P_RESET"))
         self._message("")
-        log.info("C3: selected %s", src.path)
+        log.info("C3: selected %s", path)
         return ErrorCode.SUCCESS
 
     def _start(self) -> int:
@@ -170,6 +239,7 @@ class RobotControl:
                 return ErrorCode.GENERAL  # acknowledge first (#63), as on the smartPAD
             robot.message = ""
             state = "P_RESET"
+        self._message("")  # a refusal's reason no longer holds (an error sets its own below)
         robot.kernel.hold = False
         if state == "P_RESET":
             robot._begin()  # a fresh interpreter from the first line, as --program starts
@@ -272,8 +342,10 @@ class RobotControl:
             # in its last slice, so one left unfinished leaves nothing behind.
             if job is not None and not job.step(time.perf_counter() + PLAN_BUDGET):
                 raise MotionRefused(f"planning took longer than {PLAN_BUDGET:g} s")
-        except (KrlValueError, KrlRuntimeError, MotionRefused) as exc:
-            self._message(f"{label} {position}: {exc}")
+        except (KrlValueError, KrlRuntimeError, MotionRefused, ArithmeticError) as exc:
+            # ArithmeticError: a number no float holds ({A1 <400 digits>}); CrossComm's
+            # motion refuses such a target, which the server maps to ErrorGeneral (E_FAIL)
+            self._message(f"{label} {position[:60]}: {exc}")
             return ErrorCode.GENERAL
         return ErrorCode.SUCCESS
 

@@ -89,8 +89,10 @@ class FileHandlers:
         items = self.vfs.listing(msg.path, recursive=bool(msg.flags & ListFlag.RECURSIVE))
         names = tuple(path for path, _ in items)
         infos = tuple(_info(entry) for _, entry in items)
-        size = 4 + sum(2 + 2 * units(s) for s in (*names, *infos))
-        if size > SAFE_PAYLOAD:  # the server's check before it builds the answer
+        # the server's check before it builds the answer: the strings' bytes and one u16 each
+        # (its two count fields are not counted)
+        size = sum(2 + 2 * units(s) for s in (*names, *infos))
+        if size > SAFE_PAYLOAD:
             return f.NameList(()).payload(), ErrorCode.LONG_ANSWER
         return f.NameList(names, infos).payload(), ErrorCode.SUCCESS
 
@@ -150,9 +152,12 @@ class FileHandlers:
     # ------------------------------------------------------------------ #29 upload
 
     def write_content(self, r: Reader, io: IoBuffers) -> Result:
-        op = r.u8("operation")
+        op = r.u8("operation")  # none at all: ErrorProtocol with an empty payload (handle)
         if op == FileIo.BEGIN:
-            total = r.u32("total size")
+            try:
+                total = r.u32("total size")
+            except PayloadError:  # the answer still holds the operation and the buffer's size
+                return f.IoSize(op, len(io.upload)).payload(), ErrorCode.PROTOCOL
             io.upload = bytearray()
             if total > self.vfs.limits.file_size or self.budget() + total > self.limit:
                 return f.IoSize(op, 0).payload(), ErrorCode.MEMORY
@@ -161,20 +166,25 @@ class FileHandlers:
         if op == FileIo.GET_SIZE:
             return f.IoSize(op, len(io.upload)).payload(), ErrorCode.SUCCESS
         if op == FileIo.DATA:
-            offset, size = r.u32("offset"), r.u32("size")
+            offset, size = r.u32("offset"), r.u32("size")  # cut: empty payload (handle)
             total = len(io.upload)
             if size and total and offset < total:
                 size = min(size, total - offset)
-                io.upload[offset : offset + size] = r.raw(size, "chunk data")
+                try:
+                    io.upload[offset : offset + size] = r.raw(size, "chunk data")
+                except PayloadError:  # fewer bytes than announced: nothing is stored
+                    return f.IoWritten(offset, size).payload(), ErrorCode.ACCESS
             else:
                 size = 0
             return f.IoWritten(offset, size).payload(), ErrorCode.SUCCESS
         if op == FileIo.END:
-            flags, name = r.i32("flags"), r.wstr("file name")
-            self._locked(name)
-            force = bool(flags & CopyFlag.OVERWRITE_READ_ONLY)
             try:
+                flags, name = r.i32("flags"), r.wstr("file name")
+                self._locked(name)
+                force = bool(flags & CopyFlag.OVERWRITE_READ_ONLY)
                 self.vfs.write(name, bytes(io.upload), overwrite=bool(flags & 64), force=force)
+            except PayloadError:
+                return bytes((op,)), ErrorCode.PROTOCOL
             except VfsError as exc:
                 return bytes((op,)), int(exc.code)
             io.upload = bytearray()
@@ -186,8 +196,11 @@ class FileHandlers:
     def read_content(self, r: Reader, io: IoBuffers) -> Result:
         op = r.u8("operation")
         if op == FileIo.BEGIN:
-            r.i32("flags")
-            name = r.wstr("file name")
+            try:
+                r.i32("flags")
+                name = r.wstr("file name")
+            except PayloadError:  # the operation and the buffer's size, as the server answers
+                return f.IoSize(op, len(io.download)).payload(), ErrorCode.PROTOCOL
             io.download = b""
             try:
                 io.download = self.vfs.read(name).data

@@ -20,6 +20,7 @@ its variables are readable and writable over KUKAVARPROXY and keep their values 
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from importlib import resources
 from pathlib import Path
 
@@ -81,10 +82,12 @@ def load_module(program: str | Path) -> ast.Module:
     return module
 
 
-def _declare_dat(module: ast.Module, store: VariableStore) -> None:
+def _declare_dat(
+    module: ast.Module, store: VariableStore, checkpoint: Callable[[], None] | None = None
+) -> None:
     if module.dat is not None:
         # Module data are visible to the program; we make them global so a PC can reach them.
-        store.load_dat(module.dat, all_global=True)
+        store.load_dat(module.dat, all_global=True, checkpoint=checkpoint)
 
 
 def _short_name(module: ast.Module) -> str:
@@ -120,13 +123,22 @@ def advance_timers(store: VariableStore, dt: float) -> None:
 class KrlProgram(Program):
     """A KRL module run by the robot interpreter (``--program PROG.src``)."""
 
-    def __init__(self, module: ast.Module, store: VariableStore, budget: int = DEFAULT_BUDGET):
+    def __init__(
+        self,
+        module: ast.Module,
+        store: VariableStore,
+        budget: int = DEFAULT_BUDGET,
+        *,
+        checkpoint: Callable[[], None] | None = None,
+    ):
+        """``checkpoint`` is called before every declaration of the data list (a long list
+        lets other work in, see kukavarproxy_emu.slices)."""
         self.module = module
         self.krl_name = module.name[:24]
         self.filename = _short_name(module)
         self.budget = budget
         self.interp: Interpreter | None = None
-        _declare_dat(module, store)
+        _declare_dat(module, store, checkpoint)
         _ensure_timers(store)
 
     def start(self, kernel: MotionKernel) -> None:

@@ -12,6 +12,7 @@ input (no backtracking blow-ups on hostile text).
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from ..datfile import DatSyntaxError
@@ -68,9 +69,13 @@ _SCANNER = re.compile(
 )
 
 
-def tokenize(text: str, filename: str = "<krl>") -> list[Token]:
-    """Split KRL source into tokens; raises :class:`KrlSyntaxError` on a stray character."""
+def tokenize(
+    text: str, filename: str = "<krl>", *, checkpoint: Callable[[], None] | None = None
+) -> list[Token]:
+    """Split KRL source into tokens; raises :class:`KrlSyntaxError` on a stray character.
+    ``checkpoint`` is called every 32 scanner steps (a long scan lets other work in)."""
     tokens: list[Token] = []
+    steps = 0
     lines = text.split("\n")
     pos, line, line_start, size = 0, 1, 0, len(text)
     at_line_start = True
@@ -85,6 +90,9 @@ def tokenize(text: str, filename: str = "<krl>") -> list[Token]:
                 newline = text.find("\n", first)
                 pos = size if newline < 0 else newline
                 continue
+        steps += 1
+        if checkpoint is not None and not steps & 31:
+            checkpoint()
         match = _SCANNER.match(text, pos)
         column = pos - line_start + 1
         if match is None:

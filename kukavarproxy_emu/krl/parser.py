@@ -10,6 +10,7 @@ accept exactly the same declaration syntax.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 from .. import datfile
@@ -45,6 +46,8 @@ class _Parser(MotionParser):
 
     #: Statement blocks open in the parse in progress (nesting of IF, LOOP, FOR, ...).
     blocks = 0
+    #: Called before every statement: a long parse lets other work in (kukavarproxy_emu.slices).
+    checkpoint: Callable[[], None] | None = None
 
     # ------------------------------------------------------------------------ helpers
 
@@ -155,6 +158,8 @@ class _Parser(MotionParser):
             if token.kind == "NAME" and token.value in _BLOCK_END:
                 raise self.error(f"{token.value} without a matching opening statement "
                                  f"(expected {' or '.join(closers)})")  # fmt: skip
+            if self.checkpoint is not None:
+                self.checkpoint()
             body.append(self.statement())
 
     def statement(self) -> ast.Stmt:
@@ -326,17 +331,23 @@ class _Parser(MotionParser):
         return ast.Switch(selector, tuple(cases), default, line=start.line, column=start.column)
 
 
-def parse_src(text: str, filename: str = "<src>") -> ast.Module:
-    """Parse a ``.src``/``.sub`` module; raises :class:`KrlSyntaxError` on the first error."""
-    parser = _Parser(tokenize(text, filename), text, filename)
+def parse_src(
+    text: str, filename: str = "<src>", *, checkpoint: Callable[[], None] | None = None
+) -> ast.Module:
+    """Parse a ``.src``/``.sub`` module; raises :class:`KrlSyntaxError` on the first error.
+    ``checkpoint`` is called every few hundred tokens and before every statement."""
+    parser = _Parser(tokenize(text, filename, checkpoint=checkpoint), text, filename)
+    parser.checkpoint = checkpoint
     return parser.module()
 
 
-def parse_dat(text: str, filename: str = "<dat>") -> datfile.DatFile:
+def parse_dat(
+    text: str, filename: str = "<dat>", *, checkpoint: Callable[[], None] | None = None
+) -> datfile.DatFile:
     """Parse a module ``.dat`` data list with the shared :mod:`kukavarproxy_emu.datfile`
     parser, reporting errors as :class:`KrlSyntaxError` (with the caret) like ``.src`` files."""
     try:
-        return datfile.parse_dat(text, filename)
+        return datfile.parse_dat(text, filename, checkpoint=checkpoint)
     except datfile.DatSyntaxError as exc:
         raise KrlSyntaxError(exc.reason, filename=filename, line=exc.line, column=exc.column,
                              text=exc.text) from None  # fmt: skip

@@ -28,6 +28,9 @@ NAMES = [f"V{i}" for i in range(24)]
 
 def _chaos(seed: int, counts: dict[str, int]) -> ReadHandler:
     rng = random.Random(seed)
+    # every kind at least once whatever the draws (they depend on how the client batches)
+    forced = ["unsolicited", "twice", "swap", "drop", "stall", "close"]
+    seen = [0]
 
     async def on_read(reqs: list[Request], w: asyncio.StreamWriter) -> None:
         frames: list[bytes] = []
@@ -36,6 +39,9 @@ def _chaos(seed: int, counts: dict[str, int]) -> ReadHandler:
                 ["ok", "unsolicited", "twice", "swap", "drop", "stall", "close"],
                 [96, 1, 1, 1, 1, 0.5, 0.5],
             )[0]
+            seen[0] += 1
+            if seen[0] % 97 == 50 and forced and (forced[0] != "swap" or len(frames) >= 2):
+                act = forced.pop(0)
             if r.name == "$OV_PRO":  # the client's id probe: answered, so ids are proven
                 act = "ok"
             counts[act] = counts.get(act, 0) + 1

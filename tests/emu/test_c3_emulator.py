@@ -121,6 +121,8 @@ async def test_upload_and_storage_bounds(emulator_factory: EmulatorFactory) -> N
     async with await RawClient.connect(emu.host, emu.port) as raw:
         out = await outcome(raw, FileWriteBegin(1001).frame(1))  # one byte over: nothing kept
         assert (out.code, out.payload) == (ErrorCode.MEMORY, H("01 00000000"))
+        out = await outcome(raw, FileWriteBegin(1000).frame(1))  # the limit itself: taken
+        assert (out.code, out.payload) == (ErrorCode.SUCCESS, H("01 000003E8"))
         for i in range(3):
             await outcome(raw, FileWriteBegin(10).frame(2))
             out = await outcome(raw, FileWriteEnd(f"KRC:\\R1\\Program\\F{i}.SRC", 64).frame(3))
@@ -230,6 +232,7 @@ async def test_work_per_message_is_bounded(emulator_factory: EmulatorFactory) ->
         assert (await outcome(raw, FileWriteBegin(80).frame(2))).ok
         out = await outcome(other, FileWriteBegin(30).frame(3))  # 80 + 30 > 100
         assert out.code == ErrorCode.MEMORY
+        assert (await outcome(other, FileWriteBegin(20).frame(3))).ok  # 80 + 20: the budget
         big = b"DEF BIG()\n" + b"; padding\n" * (MAX_MODULE // 10) + b"END\n"
         emu.c3.vfs.write("KRC:\\R1\\Program\\BIG.SRC", big, overwrite=True)
         out = await outcome(raw, ProgramSelect("/R1/BIG").frame(4))

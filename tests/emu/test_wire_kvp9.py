@@ -204,6 +204,7 @@ async def test_latency_no_read_while_a_read_is_served(emulator_factory: Emulator
     assert ids == [H("0001"), H("0001"), H("0002"), H("0002")]
     (info,) = emu.connections()
     assert isinstance(info, Kvp9ConnectionInfo) and info.reads == 2
+    assert (info.buffered, info.pending, info.received) == (0, 0, 4)  # nothing survives a read
 
 
 async def test_faults_apply_to_replies(emulator_factory: EmulatorFactory) -> None:
@@ -264,3 +265,98 @@ def test_wire_option_and_config_checks() -> None:
         EmulatorConfig(wire="c3")
     with pytest.raises(ValueError, match="strict"):
         EmulatorConfig(wire="kvp9", strict=True)
+
+
+# --- the same work budget as the robust mode ---------------------------------------------------
+
+
+@pytest.mark.parametrize("path", ["fast", "worker"])
+async def test_a_long_read_is_served_in_slices_between_other_clients(
+    emulator_factory: EmulatorFactory, monkeypatch: pytest.MonkeyPatch, path: str
+) -> None:
+    """170 reads of the 24 KB $IN[] in one 2048-byte read (~4 MB of replies) are answered in
+    slices: the event loop runs other work between them (here a ticker counting iterations;
+    in one go, all of the read's replies would be written within one iteration), and a
+    bystander is answered meanwhile. Both paths: parked on the fast path, yielding in the
+    worker (faults armed, no latency). Counting iterations, not time, holds on a loaded
+    machine."""
+    from kukavarproxy_emu import kvp9_connection
+
+    faults = (Fault("drop", nth=10**9),) if path == "worker" else ()
+    emu = await kvp9(emulator_factory, faults=faults)
+    tick = [0]
+    writes: list[tuple[int, int]] = []  # (connection, loop iteration) of every write
+    original = kvp9_connection.Kvp9Connection.write
+
+    def logged(self: kvp9_connection.Kvp9Connection, data: bytes) -> None:
+        writes.append((self.index, tick[0]))
+        original(self, data)
+
+    async def ticker() -> None:
+        while True:
+            await asyncio.sleep(0)
+            tick[0] += 1
+
+    monkeypatch.setattr(kvp9_connection.Kvp9Connection, "write", logged)
+    burst = b"".join(encode_read(i, "$IN[]") for i in range(170))
+    counting = asyncio.create_task(ticker())
+    try:
+        async with (
+            await RawClient.connect(emu.host, emu.port) as flood,
+            await RawClient.connect(emu.host, emu.port) as bystander,
+        ):
+            assert (await bystander.request(encode_read(1, "PING")))[:2] == H("0001")
+            flood_index = min(emu._connections)
+            writes.clear()
+            flood.writer.write(burst)
+            sink = asyncio.create_task(flood.reader.readexactly(170 * (24575 + 10)))
+            assert (await bystander.request(encode_read(2, "PING"), timeout=10))[:2] == H("0002")
+            data = await asyncio.wait_for(sink, 30)
+    finally:
+        counting.cancel()
+    assert data[:2] == H("0000") and data[-3:] == H("000101")
+    ticks = [t for index, t in writes if index == flood_index]
+    assert ticks[-1] - ticks[0] >= 3, ticks  # the read's replies spread over iterations
+
+
+async def test_a_read_paused_at_every_step_answers_the_same_bytes(
+    emulator_factory: EmulatorFactory, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """VB's walk resumes exactly where it paused: with a budget of 0 (one step per slice) a
+    read of mixed, cut and malformed requests gets byte for byte the one-go answer."""
+    from kukavarproxy_emu import kvp9_connection, server
+
+    chunk = (
+        encode_read(1, "$OV_PRO")
+        + encode_write(2, "$OV_PRO", "55")
+        + H("0003 000A 07 0007") + b"$OV_PRO"  # unknown mode: the previous reply nested
+        + encode_read(4, "$TORQUE_AXIS_ACT[]")
+        + H("0005 000C 00 0007") + b"$OV_PRO" + H("0000")  # L two bytes too large
+        + H("0006 0009 02 0006") + b"$IN[1]"  # mode 2 of one token
+        + encode_read(7, "$OV_PRO")[:9]  # cut: the read ends in errRead
+    )  # fmt: skip
+
+    async def answer(emu: Emulator) -> bytes:
+        async with await RawClient.connect(emu.host, emu.port) as c:
+            await c.send(chunk)
+            data = b""
+            with contextlib.suppress(TimeoutError):
+                while True:
+                    data += await c.read_frame(timeout=0.5)
+        return data
+
+    whole = await answer(await kvp9(emulator_factory))
+    monkeypatch.setattr(kvp9_connection, "IMMEDIATE", 0.0)
+    monkeypatch.setattr(server, "SLICE", 0.0)
+    monkeypatch.setattr(server, "ROUND", 0.0)
+    emu = await kvp9(emulator_factory)
+    served: list[int] = []
+    original = kvp9_connection.Kvp9Connection._serve
+
+    def counted(self: kvp9_connection.Kvp9Connection, budget: float) -> None:
+        served.append(1)
+        original(self, budget)
+
+    monkeypatch.setattr(kvp9_connection.Kvp9Connection, "_serve", counted)
+    assert await answer(emu) == whole
+    assert len(whole) > 100 and len(served) >= 6  # it really paused, many times
