@@ -135,9 +135,9 @@ def test_nested_groups_in_the_krl_text() -> None:
 def test_limits_refuse_values_too_small_to_work() -> None:
     SnapshotLimits(name_length=8, struc_line=80, max_text=64, max_elements=1)  # the minimums
     for bad in ({"name_length": 7}, {"struc_line": 79}, {"max_text": 63}):
-        with pytest.raises(ValueError, match="^snapshot limits too small"):
+        with pytest.raises(ValueError, match=r"^snapshot limits too small"):
             SnapshotLimits(**bad)  # type: ignore[arg-type]
-    with pytest.raises(ValueError, match="^max_elements must be >= 1$"):
+    with pytest.raises(ValueError, match=r"^max_elements must be >= 1$"):
         SnapshotLimits(max_elements=0)
 
 
@@ -150,7 +150,7 @@ def test_snapshot_names_are_checked() -> None:
     lim = SnapshotLimits()
     assert check_name("  cell_1 ", lim, "snapshot") == "CELL_1"
     assert check_name("X" * 24, lim, "snapshot") == "X" * 24
-    with pytest.raises(ValueError, match="^snapshot name 'X{25}' is longer than 24 characters$"):
+    with pytest.raises(ValueError, match=r"^snapshot name 'X{25}' is longer than 24 characters$"):
         check_name("X" * 25, lim, "snapshot")
     with pytest.raises(ValueError, match=r"^part name 'END' is not a KRL name \(letters"):
         check_name("END", lim, "part")
@@ -241,5 +241,7 @@ def test_parts_split_exactly_at_max_text() -> None:
 def test_the_longest_generated_name_decides_the_snapshot_name() -> None:
     # the longest generated name is NAME_SPS (the submit program) or NAME_W / NAME_T
     Snapshot("X" * 20, ["$OV_PRO"])  # X*20 + "_SPS" = 24
-    with pytest.raises(ValueError, match="snapshot name 'X{21}' is too long: it makes 'X{21}_SPS'"):
+    with pytest.raises(
+        ValueError, match=r"snapshot name 'X{21}' is too long: it makes 'X{21}_SPS'"
+    ):
         Snapshot("X" * 21, ["$OV_PRO"])
