@@ -181,8 +181,15 @@ def test_reply_properties() -> None:
 def _both(decode, frame: bytes):  # type: ignore[no-untyped-def]
     """Decode through the fast path (bytes) and the checked paths; all must agree."""
     fast = decode(frame)
-    assert decode(bytearray(frame)) == fast
-    assert decode(memoryview(frame)) == fast
+    for other in (bytearray(frame), memoryview(frame)):
+        checked = decode(other)
+        assert checked == fast
+        # plain bytes out, whatever came in (a memoryview value has no .decode)
+        assert type(checked.value) in (bytes, type(None))
+        assert isinstance(checked, Reply) or type(checked.name) is str
+        if isinstance(checked, Reply):
+            assert type(checked.code) is bytes and type(checked.status) is int
+    assert type(fast.value) in (bytes, type(None))
     return fast
 
 
@@ -210,6 +217,8 @@ def test_decode_requests_of_every_mode() -> None:
         ("0001 0007 01 0001 41 0005 31", "value length 5 runs past the end of the frame"),
         ("0001 0006 00 0001 41 AA BB", "2 unexpected bytes after the request blocks"),
         ("0001 0008 01 0001 41 0000 AABB", "2 unexpected bytes after the request blocks"),
+        # looks like a read at a glance (L matches the size) but the name runs past the end
+        ("0001 0003 00 000E", "name length 14 runs past the end of the frame"),
     ],
 )
 def test_malformed_requests_say_what_is_wrong(frame: str, message: str) -> None:
@@ -240,6 +249,8 @@ def test_decode_replies_kvp_c3_and_bare() -> None:
         ("0005 0005 00 0000 0001", "reply content of 5 bytes is shorter than the minimum 6"),
         ("0005 0008 00 0001 41 0001 01 FF", "reply value length 1 inconsistent with L = 8 (expected V + 6)"),
         ("0005 0008 00 0006 41 0001 01 FF", "value length 6 runs past the end of the frame"),
+        ("0005 0006 00 0014 0001 01", "value length 20 runs past the end of the frame"),
+        ("0005 0007 00 0000 0001 01 FF", "reply value length 0 inconsistent with L = 7 (expected V + 6)"),
     ],
 )  # fmt: skip
 def test_malformed_replies_say_what_is_wrong(frame: str, message: str) -> None:
@@ -256,6 +267,9 @@ def test_frame_decoder_bounds_and_their_errors() -> None:
         RequestDecoder().feed(encode_read(1, "A") + H("0002 0000"))
     assert err.value.frames == [encode_read(1, "A")]  # the whole frames before the bad one
     assert ReplyDecoder().feed(H("0002 0000")) == [H("0002 0000")]
+    # a length at the minimum but beyond the size limit is "too big", not "too small"
+    with pytest.raises(FramingError, match=r"^frame of 5 bytes exceeds the limit of 4$"):
+        RequestDecoder(max_frame=4).feed(H("0001 0001 00"))
     small = FrameDecoder(max_frame=12)
     assert small.feed(H("0001 0008") + b"x" * 8) == [H("0001 0008") + b"x" * 8]
     with pytest.raises(FramingError, match=r"^frame of 13 bytes exceeds the limit of 12$"):
