@@ -262,7 +262,26 @@ def test_malformed_replies_say_what_is_wrong(frame: str, message: str) -> None:
 # --- framing ---------------------------------------------------------------------------------------
 def test_frame_decoder_bounds_and_their_errors() -> None:
     assert RequestDecoder().min_length == 1 and ReplyDecoder().min_length == 0
+    assert FrameDecoder().min_length == 0 and FrameDecoder().feed(H("0002 0000")) == [
+        H("0002 0000")
+    ]
     assert FrameDecoder(max_frame=10**6).max_frame == MAX_FRAME
+    assert RequestDecoder(max_frame=9).max_frame == 9 and ReplyDecoder(max_frame=9).max_frame == 9
+    # a request of the minimum length (the mode byte alone) passes, whole or split
+    assert RequestDecoder().feed(H("0001 0001 05")) == [H("0001 0001 05")]
+    split = RequestDecoder()
+    assert split.feed(H("00")) == [] and split.feed(H("01 0001 05")) == [H("0001 0001 05")]
+    # four bytes make a whole L = 0 frame (a bare reply) on the buffered path too
+    bare = ReplyDecoder()
+    assert bare.feed(H("00")) == [] and bare.feed(H("02 0000")) == [H("0002 0000")]
+    # frames handed out are bytes of their own, never views of the caller's buffer
+    chunk = bytearray(H("0001 0001 05 0002 0001 06"))
+    got = RequestDecoder().feed(chunk)
+    assert got == [H("0001 0001 05"), H("0002 0001 06")] and all(type(f) is bytes for f in got)
+    whole = bytearray(H("0001 0001 05"))
+    (only,) = RequestDecoder().feed(whole)
+    whole[0] = 0xFF
+    assert only == H("0001 0001 05") and type(only) is bytes
     with pytest.raises(FramingError, match=r"^length field 0 below the minimum 1$") as err:
         RequestDecoder().feed(encode_read(1, "A") + H("0002 0000"))
     assert err.value.frames == [encode_read(1, "A")]  # the whole frames before the bad one
