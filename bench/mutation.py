@@ -359,7 +359,16 @@ def as_json(reports: list[ModuleReport]) -> str:
     return json.dumps({"modules": rows}, indent=2)
 
 
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
 def main(argv: list[str] | None = None) -> int:
+    # Ctrl-C, a kill or a closed terminal all end mutmut's process group and remove the scratch
+    # copy (the finally clauses); a background shell starts jobs with SIGINT ignored, so it is
+    # reset here too
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, _interrupt)
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("modules", nargs="+", metavar="MODULE")
     parser.add_argument("--tests", nargs="+", help="test files instead of the config's list")

@@ -12,9 +12,11 @@ import hashlib
 import json
 import os
 import re
+import signal
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import pytest
@@ -184,3 +186,60 @@ def test_text_report_shows_each_survivor_with_its_diff_and_the_table(
     assert "equivalent pkg/m.py:5: return x > 0 -> return x >= 0  (x is never 0)" in out
     # 8 killed of 10 - 1 equivalent
     assert re.search(r"pkg/m.py\s+10\s+8\s+1\s+1\s+1\s+88.9%", out)
+
+
+def _processes_in(directory: Path) -> list[int]:
+    found = []
+    for proc in Path("/proc").iterdir():
+        if not proc.name.isdigit():
+            continue
+        try:
+            cwd = os.readlink(proc / "cwd")
+        except OSError:
+            continue
+        if cwd.startswith(str(directory)):
+            found.append(int(proc.name))
+    return found
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs /proc to see the worker processes")
+def test_interrupt_ends_every_worker_and_removes_the_scratch_copy(
+    tiny: Path, tmp_path: Path
+) -> None:
+    # a test that keeps the run busy long enough to be interrupted in the middle
+    (tiny / "tests" / "test_tiny.py").write_text(
+        TESTS.replace(
+            "def test_countdown() -> None:",
+            "def test_countdown() -> None:\n    assert countdown(3_000_000) == 0",
+        )
+    )
+    before = _tree_digest(tiny)
+    scratch_parent = tmp_path / "scratch"
+    scratch_parent.mkdir()
+    env = {**os.environ, "TMPDIR": str(scratch_parent)}
+    env.pop("PYTHONPATH", None)
+    run = subprocess.Popen(
+        [sys.executable, str(SCRIPT), "--root", str(tiny), "--config", str(tiny / "mutation.toml"),
+         "--equivalent", str(tiny / "equivalent.toml"), "--nice", "0", "tinypkg.tiny"],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + 120
+        scratch = None
+        while time.monotonic() < deadline and run.poll() is None:
+            made = list(scratch_parent.glob("mutation-*/mutants/tinypkg/tiny.py.meta"))
+            if made:
+                scratch = made[0].parents[2]
+                break
+            time.sleep(0.05)
+        assert scratch is not None, "mutmut never got to testing mutants"
+        run.send_signal(signal.SIGINT)
+        _, err = run.communicate(timeout=60)
+    finally:
+        if run.poll() is None:
+            run.kill()
+    assert run.returncode == 130, err
+    assert "interrupted: the working tree was never mutated" in err
+    assert list(scratch_parent.iterdir()) == []
+    assert _processes_in(scratch) == []
+    assert _tree_digest(tiny) == before
