@@ -246,3 +246,74 @@ def test_server_without_accelerometer_needs_the_plc_attitude() -> None:
     assert not server.compensate  # no law before start(): never compensating
     server.set_compensation(True)
     assert not server.compensate
+
+
+def _server_with_law(**cfg: float) -> ControlServer:
+    server = ControlServer(None, None, config=ControlConfig(attitude="plc", **cfg))  # type: ignore[arg-type]
+    server.law = ControlLaw(server.config, THETA0)
+    for k in range(20):  # a level, still platform sampled at 50 Hz up to t = 0.38 s
+        server.estimator.add_plc(0.02 * k, 0.0, 0.0, 0.0)
+    return server
+
+
+def test_control_step_aims_half_a_period_past_the_measured_delay() -> None:
+    server = _server_with_law()
+    server.lag.value = 0.05
+    server._control_step(0.4, 0.02, THETA0)
+    assert server.rows[-1]["lead"] == pytest.approx(0.05 + 0.01)
+    server._control_step(0.42, 1.0, THETA0)  # a stalled loop: at most 25 ms added
+    assert server.rows[-1]["lead"] == pytest.approx(0.05 + 0.025)
+    server.lag.value = 1.0  # never predicts further than max_lead
+    server._control_step(0.44, 0.02, THETA0)
+    assert server.rows[-1]["lead"] == pytest.approx(ControlConfig().max_lead)
+
+
+def test_control_step_with_a_fixed_lead_and_its_row() -> None:
+    server = _server_with_law(lead=0.1)
+    server.lag.value = 0.2  # ignored: the lead is fixed
+    target = server._control_step(0.4, 0.02, THETA0)
+    row = server.rows[-1]
+    assert row["lead"] == pytest.approx(0.1) and row["t"] == 0.4 and row["dt"] == 0.02
+    assert row["comp"] == 0.0
+    assert [row[f"tgt_{k}"] for k in "xyzabc"] == pytest.approx(list(target))
+    assert [row[f"theta_{i}"] for i in range(1, 7)] == pytest.approx(list(THETA0))
+    assert [row[f"xs_{a}"] for a in "xyz"] == pytest.approx(list(server.law.x_s))  # type: ignore[union-attr]
+    assert (row["est_z"], row["est_phi"], row["est_theta"]) == pytest.approx((0.0, 0.0, 0.0))
+    server.set_compensation(True)
+    assert server.compensate
+    server._control_step(0.42, 0.02, THETA0)
+    assert server.rows[-1]["comp"] == 1.0
+    assert set(server.rows[-1]) >= {"delta_x", "xc_z", "lead"}
+
+
+async def test_a_failing_task_stops_the_server_with_its_error() -> None:
+    server = ControlServer(None, None, config=ControlConfig(attitude="plc"))
+
+    async def broken() -> None:
+        raise OSError("platform gone")
+
+    await server._guard(broken())
+    assert isinstance(server.error, OSError) and server.quit.is_set()
+    with pytest.raises(OSError, match="platform gone"):
+        await server.stop()
+
+
+async def test_cancelling_a_guarded_task_is_not_an_error() -> None:
+    import asyncio
+
+    server = ControlServer(None, None, config=ControlConfig(attitude="plc"))
+    task = asyncio.ensure_future(server._guard(asyncio.Event().wait()))
+    await asyncio.sleep(0)
+    task.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await task
+    assert server.error is None and not server.quit.is_set()
+    await server.stop()  # nothing running, nothing to raise
+
+
+async def test_waiting_for_a_data_source_times_out_with_its_name() -> None:
+    with pytest.raises(
+        TimeoutError, match=r"^no data from the accelerometer stream within 0\.05 s$"
+    ):
+        await ControlServer._wait_for(lambda: False, 0.05, "the accelerometer stream")
+    await ControlServer._wait_for(lambda: True, 0.0, "anything")  # ready: returns at once
