@@ -71,6 +71,7 @@ def test_wstr_counts_code_units_little_endian() -> None:
     w = Writer().wstr("A\U0001f600")  # U+1F600: a surrogate pair, two units
     assert w.payload() == H("0003 4100 3DD8 00DE")
     assert utf16_units("A\U0001f600") == 3 and utf16_units("") == 0
+    assert type(utf16_units("AB")) is int
     assert Reader(w.payload()).wstr() == "A\U0001f600"
 
 
@@ -79,12 +80,24 @@ def test_wstr_length_limit_is_65535_units() -> None:
     assert ok._buf[:2] == H("FFFF")  # the length prefix (payload() would refuse the size)
     with pytest.raises(PayloadError, match=r"^name of 65536 UTF-16 units exceeds 65535$"):
         Writer().wstr("x" * 0x10000, "name")
+    with pytest.raises(PayloadError, match=r"^string of 65536 UTF-16 units exceeds 65535$"):
+        Writer().wstr("x" * 0x10000)
+
+
+def test_lone_surrogates_pass_both_ways() -> None:
+    # a Windows BSTR may hold half a surrogate pair; it is carried, not refused
+    assert Writer().wstr("A\ud800").payload() == H("0002 4100 00D8")
+    assert Reader(H("0002 4100 00D8")).wstr() == "A\ud800"
 
 
 def test_payload_limit_is_one_message() -> None:
     assert MAX_PAYLOAD == 65535 - 1 - 3
     assert len(Writer().raw(b"\0" * MAX_PAYLOAD).payload()) == MAX_PAYLOAD
-    with pytest.raises(PayloadError, match=f"payload of {MAX_PAYLOAD + 1} bytes exceeds the"):
+    message = (
+        f"message payload of {MAX_PAYLOAD + 1} bytes exceeds the {MAX_PAYLOAD} one C3 Bridge"
+        " message can carry"
+    )
+    with pytest.raises(PayloadError, match=f"^{message}$"):
         Writer().raw(b"\0" * (MAX_PAYLOAD + 1)).payload()
 
 
