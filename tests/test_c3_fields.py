@@ -200,3 +200,55 @@ def test_benchmark_reply_round_trip() -> None:
     reply = BenchmarkReply(True, 3, 0xFFFFFFFF, 1, 2, 3)
     assert reply.payload()[:6] == H("01 03 FFFFFFFF")
     assert BenchmarkReply.parse(Reader(reply.payload())) == reply
+
+
+@pytest.mark.parametrize(
+    ("parse", "data", "field"),
+    [
+        (Echo.parse, "", "echo"),
+        (Value.parse, "", "length of value"),
+        (Value.parse, "0002 41", "value"),
+        (Multiple.parse, "", "count"),
+        (Multiple.parse, "01", "error code"),
+        (Multiple.parse, "01 00 0001", "value"),
+        (ProxyInfoReply.parse, "", "major"),
+        (ProxyInfoReply.parse, "01", "minor"),
+        (ProxyInfoReply.parse, "01 04", "version type"),
+        (ProxyInfoReply.parse, "01 04 00 07E8 0003 0000 0003 0009 0014 001E 01C8", "length of computer name"),
+        (ProxyInfoReply.parse, "01 04 00 07E8 0003 0000 0003 0009 0014 001E 01C8 0001", "computer name"),
+        (FeatureMap.parse, "00" * 31, "feature bits"),
+        (BenchmarkReply.parse, "01 03 0000", "UINT32"),
+    ],
+)  # fmt: skip
+def test_a_truncated_reply_names_the_missing_field(parse, data: str, field: str) -> None:  # type: ignore[no-untyped-def]
+    with pytest.raises(PayloadError, match=f", {field} needs bytes "):
+        parse(Reader(H(data)))
+
+
+def test_too_long_texts_name_their_field() -> None:
+    big = "x" * 0x10000
+    with pytest.raises(PayloadError, match=r"^value of 65536 UTF-16 units"):
+        Value(big).payload()
+    with pytest.raises(PayloadError, match=r"^value of 65536 UTF-16 units"):
+        Multiple(((1, big),)).payload()
+    t = dt.datetime(2024, 1, 1, tzinfo=dt.UTC)
+    with pytest.raises(PayloadError, match=r"^computer name of 65536 UTF-16 units"):
+        ProxyInfoReply(1, 0, 0, t, big).payload()
+
+
+def test_proxy_info_clock_does_not_depend_on_the_local_time_zone(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import time
+
+    monkeypatch.setenv("TZ", "Asia/Tokyo")  # UTC+9, no daylight saving
+    time.tzset()
+    try:
+        cet = dt.timezone(dt.timedelta(hours=1))
+        aware = ProxyInfoReply(1, 4, 0, dt.datetime(2024, 3, 3, 10, 0, 0, tzinfo=cet), "")
+        assert aware.payload()[3:17] == H("07E8 0003 0000 0003 0009 0000 0000")  # 09:00 UTC
+        naive = ProxyInfoReply(1, 4, 0, dt.datetime(2024, 3, 3, 10, 0, 0), "")
+        assert naive.payload()[3:17] == H("07E8 0003 0000 0003 000A 0000 0000")  # as given
+    finally:
+        monkeypatch.undo()  # the original TZ (or none) back, then re-read by the C library
+        time.tzset()
