@@ -64,6 +64,16 @@ def test_documented_profiles_are_fitted_to_median_mean_and_floor() -> None:
     assert thesis.write.mean == pytest.approx(0.0043) and thesis.stall_probability == 0.0
 
 
+def test_fit_takes_median_mean_and_floor_in_milliseconds() -> None:
+    st = latency._fit(2.3, 2.6, 1.5)  # the kvp read profile's figures
+    assert st.floor == pytest.approx(0.0015)
+    assert st.median == pytest.approx(0.0008)  # the body above the floor
+    assert st.sigma == pytest.approx(math.sqrt(2.0 * math.log(1.1 / 0.8)))
+    assert st.total_median == pytest.approx(0.0023) and st.mean == pytest.approx(0.0026)
+    no_floor = latency._fit(4.2, 4.3, 0.0)
+    assert no_floor.floor == 0.0 and no_floor.mean == pytest.approx(0.0043)
+
+
 def test_profile_samples_its_kind_and_adds_stalls_in_their_range() -> None:
     prof = LatencyProfile("t", ServiceTime(0.001, 0.0), ServiceTime(0.005, 0.0))
     rng = random.Random(2)
@@ -179,13 +189,16 @@ async def test_timer_skips_a_cancelled_waiter() -> None:
 
 # --- the service queue ---------------------------------------------------------------------------------
 async def test_queue_books_from_the_arrival_and_keeps_its_books() -> None:
-    queue = ServiceQueue(LatencyProfile.fixed(0.05), random.Random(0))
+    prof = LatencyProfile("t", ServiceTime(0.05, 0.0), ServiceTime(0.07, 0.0))
+    queue = ServiceQueue(prof, random.Random(0))
+    assert queue.profile is prof
+    assert queue.late.maxlen == 10_000  # bounded memory of reply lateness
     now = time.monotonic()
     # bytes read 1 s ago: the deadline passed long since, the reply is computed at once
-    assert await queue.run("read", lambda: "x", arrival=now - 1.0) == "x"
-    assert queue.scheduler.free_at == pytest.approx(now - 1.0 + 0.05)
+    assert await queue.run("write", lambda: "x", arrival=now - 1.0) == "x"
+    assert queue.scheduler.free_at == pytest.approx(now - 1.0 + 0.07)  # a write's service time
     assert queue.served == 1 and list(queue.pending) == []
-    assert queue.last_reply >= now and len(queue.late) == 1 and queue.late[0] > 0.9
+    assert queue.last_reply >= now and len(queue.late) == 1 and 0.9 < queue.late[0] < 1.5
     # an arrival in the future is taken as now: never a reply before its service time
     start = time.monotonic()
     await queue.run("write", lambda: None, arrival=start + 10.0, weight=2)
@@ -203,3 +216,68 @@ async def test_queue_publishes_pending_deadlines_while_waiting() -> None:
     with pytest.raises(asyncio.CancelledError):
         await task
     assert list(queue.pending) == [] and queue.served == 0  # cancelled: booked, never served
+    # nothing pending and no reply ever sent: the worker is idle, a tick may run
+    assert latency.tick_gate(asyncio.get_running_loop())(0.001)
+
+
+async def test_queue_with_a_random_profile_and_its_computing_lead() -> None:
+    queue = ServiceQueue(PROFILES["kvp"], random.Random(11))
+    twin = Scheduler(PROFILES["kvp"], random.Random(11))
+    past = time.monotonic() - 10.0
+    for k in range(5):
+        await queue.run("read", lambda: None, arrival=past + k)
+        # the queue's scheduler draws from the rng it was given: the same deadlines as a twin
+        assert queue.scheduler.free_at == pytest.approx(twin.reserve("read", past + k))
+    # computing "None" takes microseconds: the lead stays far below its cap
+    assert queue._compute.value < latency.MAX_COMPUTE_LEAD
+    assert queue._compute._seen.maxlen == DeadlineTimer.WINDOW
+
+
+async def test_booking_a_request_releases_the_held_ticks() -> None:
+    from kukavarproxy_emu.motion import IpoClock
+    from kukavarproxy_emu.motion import clock as motion_clock
+
+    ticks: list[float] = []
+    clock = IpoClock(lambda: ticks.append(time.monotonic()), ipo=0.02, max_hold=30.0)
+    clock.gate = lambda cost: False  # a reply is always imminent: every tick is held
+    clock.start()
+    try:
+        loop = asyncio.get_running_loop()
+
+        def held() -> bool:
+            wheel = motion_clock._WHEELS.get(loop)
+            return wheel is not None and bool(wheel.held)
+
+        async with asyncio.timeout(10.0):
+            while not held():  # noqa: ASYNC110 - the wheel has no event to wait on
+                await asyncio.sleep(0.005)  # until the tick is due and held
+        assert ticks == []
+        queue = ServiceQueue(LatencyProfile.fixed(0.0), random.Random(0))
+        await queue.run("read", lambda: None)  # the booking runs the held tick
+        assert len(ticks) >= 1 and clock.held >= 1
+    finally:
+        await clock.stop()
+
+
+def test_timer_remembers_a_bounded_window_of_wake_ups() -> None:
+    assert DeadlineTimer()._lead._seen.maxlen == DeadlineTimer.WINDOW
+
+
+async def test_tick_gate_keeps_one_and_a_half_ticks_and_a_margin_before_a_reply() -> None:
+    loop = asyncio.get_running_loop()
+    queue = ServiceQueue(LatencyProfile.fixed(5.0), random.Random(0))
+    task = asyncio.ensure_future(queue.run("read", lambda: None))
+    try:
+        async with asyncio.timeout(10.0):
+            while not queue.pending:  # noqa: ASYNC110 - booked inside run(): no event
+                await asyncio.sleep(0)
+        gate = latency.tick_gate(loop)
+        remaining = queue.pending[0] - time.monotonic()  # ~5 s; only shrinks from here on
+        # a tick whose 1.5-fold cost leaves less than the margin before the reply is held
+        assert not gate((remaining - latency.TICK_MARGIN / 2) / 1.5)
+        assert not gate(remaining)
+        assert gate((remaining - 2.0) / 1.5)  # 3 s of 1.5-fold cost before a 5 s reply: runs
+    finally:
+        task.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await task
