@@ -42,6 +42,7 @@ def test_service_time_constant_cases_and_moments() -> None:
     rng = random.Random(1)
     assert ServiceTime(0.001, 0.002).sample(rng) == 0.003  # sigma 0: constant
     assert ServiceTime(0.001, 0.0, 0.5).sample(rng) == 0.001  # median 0: the floor alone
+    assert len({ServiceTime(0.0, 0.002, 1.0).sample(rng) for _ in range(5)}) == 5  # random
     st = ServiceTime(0.001, 0.002, 0.4)
     assert st.total_median == pytest.approx(0.003)
     assert st.mean == pytest.approx(0.001 + 0.002 * math.exp(0.08))
@@ -167,6 +168,8 @@ async def test_timer_is_never_early_and_its_thread_stops_when_idle() -> None:
         await timer.wait_until(deadline)
         assert time.monotonic() >= deadline - DeadlineTimer.MAX_LEAD
     assert 0.0 <= timer.lead <= DeadlineTimer.MAX_LEAD
+    # what it learnt are wake-up delays (seconds after the aim), not clock readings
+    assert all(-1e-3 < delay < 10.0 for delay in timer._lead._seen)
     thread = timer._thread
     assert thread is not None and thread.daemon and thread.name == "kvp-latency-timer"
     await asyncio.to_thread(thread.join, 30.0)  # it ends by itself after IDLE seconds idle
@@ -231,6 +234,16 @@ async def test_queue_with_a_random_profile_and_its_computing_lead() -> None:
     # computing "None" takes microseconds: the lead stays far below its cap
     assert queue._compute.value < latency.MAX_COMPUTE_LEAD
     assert queue._compute._seen.maxlen == DeadlineTimer.WINDOW
+
+
+async def test_a_reply_computed_early_frees_the_worker_then() -> None:
+    queue = ServiceQueue(LatencyProfile.fixed(1.0), random.Random(0))
+    queue._compute.value = 0.4  # replies take 0.4 s to compute: the wait aims that much early
+    t0 = time.monotonic()
+    await queue.run("read", lambda: None, arrival=t0)
+    # booked until t0 + 1.0, answered ~0.4 s before: the next request need not wait for it
+    assert queue.scheduler.free_at < t0 + 1.0 - 0.1
+    assert queue.scheduler.free_at <= queue.last_reply
 
 
 async def test_booking_a_request_releases_the_held_ticks() -> None:
