@@ -183,23 +183,49 @@ def test_switching_compensation_off_resets_the_pid() -> None:
 
 def test_target_is_clamped_to_the_reach_and_the_orientation_reach() -> None:
     cfg = _fast(kp=0.0, ki=0.0, reach=40.0, reach_deg=5.0)
-    law = ControlLaw(cfg, THETA0)
-    law.compensate = True
-    # a platform pitched 12° and raised 100 mm: the exact target is far outside the box
-    pose = PlatformPose(100.0, 0.0, 12.0)
-    target = law.step(0.01, THETA0, pose, pose, [0.0, 0.0, 0.0])
-    offset = target - law.base0
-    assert np.abs(offset[:3]).max() == pytest.approx(40.0)
-    assert np.abs(offset[:3]).max() <= 40.0 + 1e-9
-    assert np.abs(offset[3:]).max() == pytest.approx(5.0)
-    assert np.abs(offset[3:]).max() <= 5.0 + 1e-9
-    assert law.smoother.state == pytest.approx(target)  # the smoother continues from the clamp
+    # a platform raised (lowered) 100 mm and pitched 12°: the exact target is far outside the box
+    for sign in (1.0, -1.0):
+        law = ControlLaw(cfg, THETA0)
+        law.compensate = True
+        pose = PlatformPose(100.0 * sign, 0.0, 12.0 * sign)
+        target = law.step(0.01, THETA0, pose, pose, [0.0, 0.0, 0.0])
+        offset = target - law.base0
+        assert np.all(np.abs(offset[:3]) <= 40.0 + 1e-9)
+        assert np.all(np.abs(offset[3:]) <= 5.0 + 1e-9)
+        assert np.abs(offset[:3]).max() == pytest.approx(40.0)
+        assert np.abs(offset[3:]).max() == pytest.approx(5.0)
+        assert law.smoother.state == pytest.approx(target)  # the smoother goes on from the clamp
     # inside the box nothing is clipped
     small = PlatformPose(10.0, 0.0, 1.0)
     law2 = ControlLaw(cfg, THETA0)
     law2.compensate = True
     inner = law2.step(0.01, THETA0, small, small, [0.0, 0.0, 0.0]) - law2.base0
     assert 0 < np.abs(inner[:3]).max() < 40.0 and 0 < np.abs(inner[3:]).max() < 5.0
+
+
+def test_pid_correction_pushes_the_flange_towards_the_set_point() -> None:
+    moved = THETA0 + np.array([0.0, 1.5, -1.0, 0.0, 0.0, 0.0])  # the robot is off its start
+    targets = {}
+    for kp in (0.0, 0.5):
+        law = ControlLaw(_fast(kp=kp, ki=0.0, pid_limit=1e6, reach=1e6, reach_deg=180.0), THETA0)
+        law.compensate = True
+        targets[kp] = law.step(0.01, moved, LEVEL, LEVEL, [0.0, 0.0, 0.0])
+        error = law.x_s - law.x_c
+        assert np.abs(error).max() > 1.0
+        assert law.delta == pytest.approx(kp * error)  # δx = kp (x_s - x_c)
+    # on a level platform the correction shifts the robot target by δx itself
+    assert targets[0.5][:3] - targets[0.0][:3] == pytest.approx(0.5 * error, abs=1e-6)
+    assert targets[0.5][3:] == pytest.approx(targets[0.0][3:], abs=1e-9)
+
+
+def test_the_mount_places_the_robot_on_the_platform() -> None:
+    mount = np.eye(4)
+    mount[:3, 3] = [10.0, -20.0, 100.0]  # the robot base 100 mm above the plate, off-centre
+    plain, mounted = ControlLaw(_fast(), THETA0), ControlLaw(_fast(), THETA0, mount)
+    assert mounted.x_s - plain.x_s == pytest.approx([10.0, -20.0, 100.0])
+    assert mounted.base0 == pytest.approx(plain.base0)  # the robot's own target is unchanged
+    world = mounted.world_flange(LEVEL, THETA0)[:3, 3] - plain.world_flange(LEVEL, THETA0)[:3, 3]
+    assert world == pytest.approx([10.0, -20.0, 100.0])
 
 
 def test_orientation_near_180_degrees_takes_the_short_way() -> None:
