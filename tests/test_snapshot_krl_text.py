@@ -245,3 +245,53 @@ def test_the_longest_generated_name_decides_the_snapshot_name() -> None:
         ValueError, match=r"snapshot name 'X{21}' is too long: it makes 'X{21}_SPS'"
     ):
         Snapshot("X" * 21, ["$OV_PRO"])
+
+
+def _text_estimate(part) -> int:  # type: ignore[no-untyped-def]
+    """The documented worst case of one part's reply: its slots, "{TYPE: CYCLE n, ...}" and,
+    when nested, "Gk {TYPE: ...}, " per group."""
+    text = sum(slot.text_max for _, slot in part.paths) + len(part.type_name) + 24
+    groups = part.types[:-1]
+    return text + sum(len(t.name) + 12 for t in groups)
+
+
+_MANY = ["$AXIS_ACT", "$POS_ACT", "$POS_ACT_MES", "$OV_PRO", "$VEL_ACT", "$MODE_OP",
+         "$TORQUE_AXIS_ACT[]", ("A_LONGER_USER_NAME", "REAL"), ("FLAG", "BOOL")]  # fmt: skip
+
+
+@pytest.mark.parametrize("name", ["N", "CELLSNAP"])
+def test_layouts_are_packed_greedily_up_to_each_limit(name: str) -> None:
+    for struc in range(80, 400, 7):
+        for max_text in (700, 1500, 4096):
+            limits = SnapshotLimits(struc_line=struc, max_text=max_text)
+            try:
+                snap = Snapshot(name, _MANY, limits=limits)
+            except ValueError as exc:
+                assert "alone does not fit" in str(exc)
+                continue
+            slots = [slot for p in snap.parts for _, slot in p.paths]
+            assert [s.source for s in slots] == [
+                s.source for v in snap.variables for s in v.slots
+            ]  # every slot once, in order
+            for part in snap.parts:
+                assert all(len(struc_line(t)) <= struc for t in part.types)
+                assert _text_estimate(part) <= max_text
+                flat = len(part.types) == 1
+                members = [(s.member, s.type_name) for _, s in part.paths]
+                line = struc_line(StrucType(part.type_name, (("CYCLE", "INT"), *members)))
+                assert flat == (len(line) <= struc)  # flat exactly when the flat line fits
+                if not flat:  # groups are full: the next member would not fit the line
+                    for g, nxt in zip(part.types[:-2], part.types[1:-1], strict=True):
+                        grown = StrucType(g.name, (*g.members, nxt.members[0]))
+                        assert len(struc_line(grown)) > struc
+
+
+def test_a_nested_part_fits_max_text_exactly() -> None:
+    roomy = Snapshot("N", _MANY, limits=SnapshotLimits(struc_line=120, max_text=60000))
+    (part,) = roomy.parts
+    assert len(part.types) > 2  # nested, in several groups
+    need = _text_estimate(part)
+    exact = Snapshot("N", _MANY, limits=SnapshotLimits(struc_line=120, max_text=need))
+    assert len(exact.parts) == 1 and _text_estimate(exact.parts[0]) == need
+    short = Snapshot("N", _MANY, limits=SnapshotLimits(struc_line=120, max_text=need - 1))
+    assert len(short.parts) == 2
