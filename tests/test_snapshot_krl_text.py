@@ -295,3 +295,71 @@ def test_a_nested_part_fits_max_text_exactly() -> None:
     assert len(exact.parts) == 1 and _text_estimate(exact.parts[0]) == need
     short = Snapshot("N", _MANY, limits=SnapshotLimits(struc_line=120, max_text=need - 1))
     assert len(short.parts) == 2
+
+
+def _registry(*structs: tuple[str, tuple[tuple[str, str], ...]]):  # type: ignore[no-untyped-def]
+    reg = BUILTIN_TYPES.copy()
+    for name, members in structs:
+        reg.add_struct(name, members)
+    return reg
+
+
+def _chain(depth: int, leaf: str) -> list[tuple[str, tuple[tuple[str, str], ...]]]:
+    """C0 holds C1 ... holds C{depth}, which holds ``leaf``."""
+    out = [(f"C{depth}", (("V", leaf),))]
+    out += [(f"C{k}", (("N", f"C{k + 1}"),)) for k in range(depth - 1, -1, -1)]
+    return out
+
+
+def test_structures_holding_arrays_are_refused_at_any_depth_up_to_the_bound() -> None:
+    ok = _registry(("HAS_TEXT", (("NAME", "CHAR[8]"), ("X", "REAL"))))
+    Snapshot("S", [("T", "HAS_TEXT")], registry=ok)  # CHAR arrays are allowed members
+    spaced = _registry(("SPACED", (("V", "REAL [3]"),)))
+    with pytest.raises(ValueError, match=r"STRUC SPACED holds an array; KRL documents only CHAR"):
+        Snapshot("S", [("T", "SPACED")], registry=spaced)
+    # an unknown member type is skipped, the array after it still found
+    later = _registry(("LATER", (("U", "NO_SUCH_T"), ("V", "INT[2]"))))
+    with pytest.raises(ValueError, match="holds an array"):
+        Snapshot("S", [("T", "LATER")], registry=later)
+    # nested: found eight structures down, not looked for beyond (a bound on the recursion)
+    with pytest.raises(ValueError, match="STRUC C0 holds an array"):
+        Snapshot("S", [("T", "C0")], registry=_registry(*_chain(8, "REAL[2]")))
+    Snapshot("S", [("T", "C0")], registry=_registry(*_chain(9, "REAL[2]")))
+    assert resolve_variable("T", "C0", set(), _registry(*_chain(3, "INT")), SnapshotLimits())
+
+
+def test_text_size_of_nested_and_looping_structures_is_bounded() -> None:
+    loopy = _registry(("LOOPY", (("NEXT", "LOOPY"),)))
+    spec = loopy.resolve("LOOPY")
+    # eight levels of "LOOPY" + 4 and "NEXT" + 3, then an unsizeable type: 256
+    assert _text_max(spec, loopy) == 8 * (5 + 4 + 4 + 3) + 256
+    Snapshot("S", [("L", "LOOPY")], registry=loopy)  # terminates, no RecursionError
+    assert _text_max(TypeSpec(Kind.ENUM, "SOME_ENUM_T"), BUILTIN_TYPES) == 25  # values unknown
+
+
+def test_member_names_keep_short_and_numbered_names() -> None:
+    reg = BUILTIN_TYPES
+    assert _member_name("A1", set(), reg, 24) == "A1"
+    assert _member_name("ABCDEFGHIJ", {"ABCDEFGH"}, reg, 8) == "ABCDEF_2"
+
+
+def test_refusal_messages_in_full() -> None:
+    with pytest.raises(ValueError) as err:
+        resolve_variable("X", "CHAR[8]", set(), BUILTIN_TYPES, SnapshotLimits())
+    assert str(err.value) == (
+        "'X' is CHAR text: KRL copies a CHAR array only with STRCOPY, which snapshots do not"
+        " generate; read it on its own"
+    )
+    holder = _registry(("HOLDER", (("V", "REAL[3]"),)))
+    with pytest.raises(ValueError) as err:
+        resolve_variable("H", "HOLDER", set(), holder, SnapshotLimits())
+    assert str(err.value) == (
+        "'H': STRUC HOLDER holds an array; KRL documents only CHAR arrays as STRUC members,"
+        " so a snapshot cannot nest it"
+    )
+    with pytest.raises(ValueError) as err:
+        resolve_variable("$OV_PRO[1]", None, set(), BUILTIN_TYPES, SnapshotLimits())
+    assert str(err.value) == "'$OV_PRO[1]': $OV_PRO is not an array"
+    with pytest.raises(ValueError) as err:
+        resolve_variable("$TORQUE_AXIS_ACT.X", None, set(), BUILTIN_TYPES, SnapshotLimits())
+    assert str(err.value) == "'$TORQUE_AXIS_ACT.X': $TORQUE_AXIS_ACT is an array, index it first"
