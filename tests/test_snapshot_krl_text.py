@@ -197,7 +197,8 @@ def test_whole_arrays_and_elements() -> None:
     with pytest.raises(ValueError, match="a member of a whole array means nothing"):
         resolve_variable("ARR[].X", "POS[2]", set(), BUILTIN_TYPES, lim)
     e = resolve_variable("$TORQUE_AXIS_ACT[12]", None, set(), BUILTIN_TYPES, lim)
-    assert not e.whole_array and e.type_name == "REAL" and e.slots[0].member == "TORQUE_AXIS_ACT_12"
+    assert e.whole_array is False and e.type_name == "REAL"
+    assert e.slots[0].member == "TORQUE_AXIS_ACT_12"
     for bad, why in (
         ("$TORQUE_AXIS_ACT[0]", "index out of range 1..12"),
         ("$TORQUE_AXIS_ACT[13]", "index out of range 1..12"),
@@ -363,3 +364,13 @@ def test_refusal_messages_in_full() -> None:
     with pytest.raises(ValueError) as err:
         resolve_variable("$TORQUE_AXIS_ACT.X", None, set(), BUILTIN_TYPES, SnapshotLimits())
     assert str(err.value) == "'$TORQUE_AXIS_ACT.X': $TORQUE_AXIS_ACT is an array, index it first"
+
+
+def test_names_may_carry_blanks_and_any_case() -> None:
+    v = resolve_variable("$pos_act . x", None, set(), BUILTIN_TYPES, SnapshotLimits())
+    assert v.slots[0].source == "$POS_ACT.X" and v.name == "$pos_act . x"
+    assert (
+        resolve_variable("r", " real ", set(), BUILTIN_TYPES, SnapshotLimits()).type_name == "REAL"
+    )
+    with pytest.raises(ValueError, match="is in the snapshot twice"):
+        unique_names([("$OV_PRO", None), ("$ov_ pro", None)])
