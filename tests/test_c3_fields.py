@@ -112,6 +112,11 @@ def test_truncated_field_names_itself_and_the_bytes_it_needed(method: str, what:
         getattr(Reader(b""), method)()
 
 
+def test_truncated_binary_field_is_named_binary() -> None:
+    with pytest.raises(PayloadError, match=r"^payload ends at byte 1, BINARY needs bytes 0\.\.1$"):
+        Reader(b"x").raw(2)
+
+
 def test_reader_positions_remaining_and_end() -> None:
     r = Reader(H("01 0002 4100 4200 AA BB"))
     assert r.remaining == 9
