@@ -191,6 +191,9 @@ def test_feature_map_bits_and_strings() -> None:
     assert data[0] == 0x80 and data[30] == 0x01 and data[31] == 0x81
     assert sum(bin(b).count("1") for b in data) == 4
     assert FeatureMap.parse(Reader(data)).types == {0, 7, 8, 255}
+    # type 256 would wrap onto type 0's bit: it must not
+    assert FeatureMap(frozenset({256})).payload() == bytes(32)
+    assert FeatureMap(frozenset({-1, -8})).payload() == bytes(32)
     assert FeatureMap(frozenset()).to_string() == "00000000"  # at least 8 characters
     assert FeatureMap(frozenset({3})).to_string() == "00001000"
     assert FeatureMap(frozenset({8})).to_string() == "100000000"
