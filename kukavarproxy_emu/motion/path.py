@@ -258,17 +258,31 @@ class PathLimits:
         a_s = min(a_cp, _BIG)
         gam = np.hstack([gam, np.full((len(s), 1), a_s)])
         beta = np.hstack([beta, np.zeros((len(s), 1))])
-        alp = -gam
+        self._xcap0 = np.minimum(xcap, np.min(still, axis=1))
+        self._rows = (-gam, beta, gam)
+        self._finish()
+
+    def constrain(
+        self, alp: FloatArray, beta: FloatArray, gam: FloatArray, cap: FloatArray
+    ) -> None:
+        """Add rows ``α + β·ṡ² ≤ s̈ ≤ γ + β·ṡ²`` (``(nodes, k)`` arrays) and a cap on ṡ² per
+        node (the motors' torque, :meth:`.dynamics.ControllerDynamics.path_rows`)."""
+        a0, b0, g0 = self._rows
+        self._rows = (np.hstack([a0, alp]), np.hstack([b0, beta]), np.hstack([g0, gam]))
+        self._xcap0 = np.minimum(self._xcap0, cap)
+        self._finish()
+
+    def _finish(self) -> None:
+        alp, beta, gam = self._rows
         # (β_j − β_m)·x ≤ γ_m − α_j for every pair of a lower and an upper bound
         db = beta[:, :, None] - beta[:, None, :]
         room = gam[:, None, :] - alp[:, :, None]
         with np.errstate(divide="ignore", invalid="ignore"):
             pair = np.where(db > 0, room / db, np.inf)
-        xcap = np.minimum(xcap, np.min(pair, axis=(1, 2)))
-        xcap = np.minimum(xcap, np.min(still, axis=1))
+        xcap = np.minimum(self._xcap0, np.min(pair, axis=(1, 2)))
         self.xcap = xcap
         self._alp, self._beta, self._gam = alp.tolist(), beta.tolist(), gam.tolist()
-        self._s, self._cap = s.tolist(), xcap.tolist()
+        self._s, self._cap = self.s.tolist(), xcap.tolist()
 
     # --- bounds ---------------------------------------------------------------------------
     def _lo(self, k: int, x: float) -> float:
