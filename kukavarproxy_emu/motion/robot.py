@@ -89,6 +89,8 @@ class Robot:
         self.kernel.plant = self.plant
         if self.plant is not None:
             self.plant.on_fault = self._drive_fault
+        else:
+            self.kernel.publish_torque()  # the model's start-up torques (both plants)
         if isinstance(program, Program):
             self.program = program
         else:

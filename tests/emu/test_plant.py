@@ -220,6 +220,24 @@ def test_torques_at_rest_are_the_models_with_load_and_wrench() -> None:
     np.testing.assert_allclose(torques(store), loaded + jac.T @ wrench, rtol=0, atol=1e-6)
 
 
+def test_ideal_plant_starts_with_the_models_torques() -> None:
+    """Both plants publish their model's torques from the first read: the ideal plant's
+    start-up torques are the ones it shows after a move away and back, not the store's
+    rounded start-up table (-25.5 for A3)."""
+    store = VariableStore()
+    robot = Robot(store, program="none", sps=None, plant="ideal")
+    start = store.read("$TORQUE_AXIS_ACT[]")
+    assert not start.startswith("0.0 -24.7800 -25.5000")
+    robot.kernel.ptp(HOME + np.array([10.0, 5.0, -5.0, 0.0, 20.0, 0.0]))
+    robot.kernel.ptp(HOME)
+    while robot.kernel.moving:
+        robot.tick()
+    for _ in range(3):  # the last cycle's deceleration leaves the inertial term
+        robot.tick()
+    assert store.read("$TORQUE_AXIS_ACT[]") == start
+    assert store.read("$AXIS_ACT").startswith("{E6AXIS: A1 0.0, A2 -90.0000, A3 90.0000")
+
+
 # --- servo -------------------------------------------------------------------------------------
 def test_servo_step_response_and_disturbance_rejection() -> None:
     robot = quiet_robot()
