@@ -10,8 +10,9 @@ inertia), a 50 % PTP from HOME to the pose, then up to 2 s for the plant to come
 the set-point) and the CPU the ticks cost (% of one core at real time, no reader).
 
 Part 2, **planning** (the controller's set-points against the plant's motors): random PTP,
-LIN ($VEL.CP 2 m/s) and C_PTP chains (three targets, $APO.CPTP 50 %) with payloads 0, 4.5
-and 6 kg. For every IPO cycle the torque the plant's motors need to follow the set-points
+LIN ($VEL.CP 2 m/s), C_PTP chains (three targets, $APO.CPTP 50 %, all planned before the
+first starts) and C_PTP chains whose next targets are planned while the robot runs (as a
+follower program does; random $APO.CPTP 10–100 %) with payloads 0, 4.5 and 6 kg. For every IPO cycle the torque the plant's motors need to follow the set-points
 (the plant's inverse dynamics at the cycle's mean acceleration + its friction) over the
 plant's max torque, and the set-point acceleration over the axis' limit; the worst of each.
 Plus the case the issue names: HOME, A3 alone at full acceleration with 6 kg.
@@ -120,6 +121,17 @@ def settle_case(pose: np.ndarray, load: str, seed: int) -> dict[str, float]:
 
 
 # --- part 2: what the planner asks of the motors ---------------------------------------------
+def plant_friction(plant: DynamicPlant, qd: np.ndarray) -> np.ndarray:
+    """The plant's joint friction at speeds ``qd`` (rad/s); also for the code before the
+    Stribeck law (Coulomb tanh + viscous), so the script measures both versions."""
+    b, p = plant.bodies, plant.params
+    if hasattr(b, "static"):
+        from kukavarproxy_emu.plant.drives import friction
+
+        return friction(b, p.friction_smoothing, p.stribeck_velocity, qd)[0]
+    return np.asarray(b.coulomb * np.tanh(qd / p.friction_smoothing) + b.viscous * qd)
+
+
 class Needs:
     """Worst torque and acceleration ratios of set-point traces against the plant's motors."""
 
@@ -139,12 +151,10 @@ class Needs:
         v = np.diff(q, axis=0) / IPO  # mean speed of each cycle
         a = np.diff(v, axis=0) / IPO  # mean acceleration around each set-point
         vm = 0.5 * (v[1:] + v[:-1])
-        b = self.plant.bodies
-        vs = self.plant.params.friction_smoothing
         for k in range(len(a)):
             self.data.qpos[:], self.data.qvel[:], self.data.qacc[:] = q[k + 1], vm[k], a[k]
             mujoco.mj_inverse(self.m, self.data)
-            fric = b.coulomb * np.tanh(vm[k] / vs) + b.viscous * vm[k]
+            fric = plant_friction(self.plant, vm[k])
             ratio = float(np.max(np.abs(self.data.qfrc_inverse + fric) / self.limit))
             if ratio > self.torque:
                 self.torque, self.where = ratio, what
@@ -152,11 +162,12 @@ class Needs:
         self.accel = max(self.accel, float(np.max(acc)))
 
 
-def planner_case(mass: float, moves: int, seed: int) -> tuple[Needs, Needs, Needs]:
-    """(PTP, LIN, C_PTP) worst needs over ``moves`` random moves of each kind."""
+def planner_case(mass: float, moves: int, seed: int) -> tuple[Needs, Needs, Needs, Needs]:
+    """(PTP, LIN, C_PTP, C_PTP planned while running) worst needs over ``moves`` random moves
+    of each kind."""
     rng = np.random.default_rng(seed)
     out = []
-    for kind in ("PTP", "LIN", "C_PTP"):
+    for kind in ("PTP", "LIN", "C_PTP", "C_PTP live"):
         needs: Needs | None = None
         for k in range(moves):
             store = VariableStore()
@@ -188,6 +199,8 @@ def planner_case(mass: float, moves: int, seed: int) -> tuple[Needs, Needs, Need
                     for _ in range(2):
                         kernel.ptp(random_pose(rng), approx=True)
                     kernel.ptp(random_pose(rng))
+                elif kind == "C_PTP live":
+                    live_chain(robot, rng)
                 else:
                     end = start + rng.uniform(-30.0, 30.0, 6)
                     end = np.clip(end, M.lower * 0.9, M.upper * 0.9)
@@ -198,11 +211,31 @@ def planner_case(mass: float, moves: int, seed: int) -> tuple[Needs, Needs, Need
                 robot.tick()
             for _ in range(2):
                 robot.tick()
-            assert kernel.trace is not None
+            assert kernel.trace is not None and needs is not None
             needs.trace([s[1] for s in kernel.trace], f"{kind} {mass:g} kg")
         assert needs is not None
         out.append(needs)
-    return out[0], out[1], out[2]
+    return out[0], out[1], out[2], out[3]
+
+
+def live_chain(robot: Robot, rng: np.random.Generator) -> None:
+    """Four approximated PTPs, the next three planned at random cycles while the robot runs
+    (within its first 0.7 s), as a program whose advance run gets each target late does."""
+    kernel = robot.kernel
+    robot.store.write("$APO.CPTP", str(int(rng.uniform(10, 100))))
+    targets = [random_pose(rng) for _ in range(4)]
+    plan_at = sorted(int(c) for c in rng.integers(1, 60, 3))
+    kernel.ptp(targets[0], approx=True)
+    for n in range(6000):
+        for i, at in enumerate(plan_at, start=1):
+            if n == at:
+                try:
+                    kernel.ptp(targets[i], approx=i < 3)
+                except MotionRefused:
+                    pass
+        if n > plan_at[-1] and not kernel.moving:
+            return
+        robot.tick()
 
 
 def home_a3(mass: float) -> float:
@@ -252,15 +285,16 @@ def main() -> None:
                 "% core", note=f"worst pose {max(cpu):.1f} % of a core"),
         ]  # fmt: skip
     for mass in MASSES:
-        ptp, lin, cptp = planner_case(mass, moves, seed=int(mass * 10) + 7)
         label = f"{mass:g} kg"
+        kinds = ("PTP", "LIN", "C_PTP", "C_PTP planned while running")
+        needs = planner_case(mass, moves, seed=int(mass * 10) + 7)
         rows += [
-            Row(f"{label}: worst needed torque / max torque, PTP", ptp.torque, "ratio"),
-            Row(f"{label}: worst needed torque / max torque, LIN", lin.torque, "ratio"),
-            Row(f"{label}: worst needed torque / max torque, C_PTP", cptp.torque, "ratio"),
-            Row(f"{label}: worst set-point accel / limit, PTP", ptp.accel, "ratio"),
-            Row(f"{label}: worst set-point accel / limit, LIN", lin.accel, "ratio"),
-            Row(f"{label}: worst set-point accel / limit, C_PTP", cptp.accel, "ratio"),
+            Row(f"{label}: worst needed torque / max torque, {kind}", n.torque, "ratio")
+            for kind, n in zip(kinds, needs, strict=True)
+        ]
+        rows += [
+            Row(f"{label}: worst set-point accel / limit, {kind}", n.accel, "ratio")
+            for kind, n in zip(kinds, needs, strict=True)
         ]
     rows.append(Row("6 kg at HOME, A3 alone at full acceleration: torque / max", home_a3(6.0),
                     "ratio"))  # fmt: skip
