@@ -119,11 +119,12 @@ def _chain(q0: FloatArray, q: FloatArray) -> FloatArray:
 
 def _singularity(model: RobotModel, q: FloatArray) -> str:
     """Which of the KSS singularities a joint position is near."""
+    # plain ASCII: the text ends up in $EMU_MESSAGE[], a KRL CHAR array (no Greek letters)
     if abs(q[4]) < 10.0:
-        return "α5 (wrist axes, A5 = 0)"
+        return "wrist (A5 = 0)"
     if abs(q[2] - model.status_phi) < 10.0:
-        return "α2 (arm stretched)"
-    return "α1 (wrist centre above axis 1)"
+        return f"arm-stretched (A3 = {model.status_phi:.1f})"
+    return "overhead (wrist centre above A1)"
 
 
 def joint_path(
