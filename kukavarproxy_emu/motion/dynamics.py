@@ -48,7 +48,7 @@ MACHINE_DATA = {"KUKA KR 6 R900 sixx": Path(__file__).with_name("kr6r900sixx_mac
 #: The slowest a PTP is made by the adaptation: 1 % of its acceleration (it always arrives).
 MIN_SCALE = 0.01
 #: Nodes of a LIN whose dynamics are computed per slice of planning.
-NODE_CHUNK = 100
+NODE_CHUNK = 25
 _BIG = 1e30
 
 

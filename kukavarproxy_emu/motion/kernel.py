@@ -405,8 +405,10 @@ class MotionKernel(Publisher):
                 self.model, s, q, geo, v, a, self.model.max_speed, self.model.max_accel
             )
             if self.dynamics is not None:
+                yield  # the limits above were one slice; the motors' rows are more
                 self.dynamics.use_load(self.store.get("$LOAD"))
                 limits.constrain(*(yield from self.dynamics.path_rows(q, limits.qp, limits.qpp)))
+                yield
             curve, bw = yield from limits.plan()
             profile = Profile(*curve)
         except PathRefused as exc:
