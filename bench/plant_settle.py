@@ -260,8 +260,8 @@ def main() -> None:
     ap.add_argument("--poses", type=int, default=40, help="random poses per payload")
     ap.add_argument("--moves", type=int, default=20, help="random moves per kind and payload")
     args = ap.parse_args()
-    poses = 4 if args.quick else args.poses
-    moves = 3 if args.quick else args.moves
+    poses = 1 if args.quick else args.poses
+    moves = 1 if args.quick else args.moves
     rng = np.random.default_rng(2026)
     rows: list[Row] = []
     cpu_all: list[float] = []
