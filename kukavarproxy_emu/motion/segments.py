@@ -195,11 +195,13 @@ def blend(cur: Segment, nxt: Segment, progress: Callable[[], float]) -> Generato
         head = yield from nxt.limits.forward(frac_b, v_b * v_b, nxt.bw)
     except (ValueError, PathRefused):
         return False
-    if tail[0][0] < cur.head_end - 1e-12:
+    mid = pl_min(tail, old)
+    # braking starts at the node before the first one the new curve passes slower
+    slower = np.flatnonzero(mid[1] < np.interp(mid[0], *old) * (1.0 - 1e-9) - 1e-12)
+    if len(slower) and mid[0][max(int(slower[0]) - 1, 0)] < cur.head_end - 1e-9:
         # slowing down for this window would begin inside the window cur was blended in by:
         # three motions would superpose and their accelerations add. Stop exactly instead.
         return False
-    mid = pl_min(tail, old)
     keep = old[0] < mid[0][0]
     new_cur = (
         np.concatenate([old[0][keep], mid[0], [1.0]]),
