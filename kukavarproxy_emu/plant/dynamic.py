@@ -271,7 +271,7 @@ class DynamicPlant(Sensors):
         payload = payload_of(load)
         if payload != self._payload:
             try:
-                self._build(payload)  # the servo gains follow M(q), with the load, each step
+                self._build(payload)  # the servo gains follow M(q) with the load, each cycle
             except ValueError as exc:  # MuJoCo refused the model: keep the previous one
                 log.warning(
                     "$LOAD %s cannot be simulated (%s); keeping the previous load", payload, exc
