@@ -133,6 +133,13 @@ CALIBRATION_HELP = (
 )
 
 
+def calibration_option(help_text: str = CALIBRATION_HELP) -> Any:
+    """The ``--calibration-error SEED|off`` option (for ``Annotated[str | None, ...]``)."""
+    return typer.Option(
+        "--calibration-error", metavar="SEED|off", callback=calibration_choice, help=help_text
+    )
+
+
 def check_port(value: int) -> int:
     """typer callback: a TCP/UDP port a client can connect to (1..65535)."""
     if not 1 <= value <= 0xFFFF:

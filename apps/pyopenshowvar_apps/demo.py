@@ -31,7 +31,7 @@ import typer
 from rich.console import Console
 
 from pyopenshowvar_apps.casestudies.common import CaseResult, output_dir, summary_table
-from pyopenshowvar_apps.common import calibration_choice, calibration_seed, plant_choice
+from pyopenshowvar_apps.common import calibration_option, calibration_seed, plant_choice
 
 __all__ = ["demo", "run_demo"]
 
@@ -290,14 +290,9 @@ def demo(
     ] = 1,
     calibration_error: Annotated[
         str | None,
-        typer.Option(
-            "--calibration-error",
-            metavar="SEED|off",
-            callback=calibration_choice,
-            help=(
-                "Seed of the physical robot's calibration error (default: --seed), 'off' for "
-                "a perfect model (dynamic plant)."
-            ),
+        calibration_option(
+            "Seed of the physical robot's calibration error (default: --seed), 'off' for a "
+            "perfect model (dynamic plant)."
         ),
     ] = None,
 ) -> None:

@@ -13,7 +13,7 @@ from typing import Annotated, Any
 
 import typer
 
-from pyopenshowvar_apps.common import CALIBRATION_HELP, calibration_choice
+from pyopenshowvar_apps.common import calibration_option
 
 __all__ = ["linefollow"]
 
@@ -80,15 +80,7 @@ def linefollow(
     speed: Annotated[
         float, typer.Option(callback=_positive, help="Emulator speed factor with --emulate.")
     ] = 1.0,
-    calibration_error: Annotated[
-        str | None,
-        typer.Option(
-            "--calibration-error",
-            metavar="SEED|off",
-            callback=calibration_choice,
-            help=CALIBRATION_HELP,
-        ),
-    ] = None,
+    calibration_error: Annotated[str | None, calibration_option()] = None,
 ) -> None:
     """Follow a line drawn on a table (thesis case study 2): A*, LIN path, $POS_ACT deviation."""
     import asyncio

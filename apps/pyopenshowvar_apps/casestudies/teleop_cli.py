@@ -14,13 +14,7 @@ from typing import Annotated, Any
 
 import typer
 
-from pyopenshowvar_apps.common import (
-    CALIBRATION_HELP,
-    EXIT_USAGE,
-    calibration_choice,
-    check_seconds,
-    fail,
-)
+from pyopenshowvar_apps.common import EXIT_USAGE, calibration_option, check_seconds, fail
 
 __all__ = ["haptic", "teleop"]
 
@@ -30,13 +24,7 @@ SimFlag = Annotated[bool, typer.Option("--sim", hidden=True, help="Deprecated: u
 
 
 #: ``--calibration-error`` (with --emulate).
-CalibrationOpt = Annotated[
-    str | None,
-    typer.Option(
-        "--calibration-error", metavar="SEED|off", callback=calibration_choice,
-        help=CALIBRATION_HELP,
-    ),
-]  # fmt: skip
+CalibrationOpt = Annotated[str | None, calibration_option()]
 
 
 def _run(
