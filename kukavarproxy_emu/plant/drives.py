@@ -69,6 +69,7 @@ class Drives:
         self._integral = [0.0] * 6
         self._full = np.zeros((6, 6))
         self._kd = [0.0] * 6
+        self._kdc = [0.0] * 6
         self._ff = [0.0] * 6
 
     @property
@@ -85,6 +86,7 @@ class Drives:
         mujoco.mj_fullM(m, d, self._full)
         inertia = self._full.diagonal().tolist()
         self._kd = [i * self.bandwidth for i in inertia]
+        self._kdc = [k * self.corner * self.h for k in self._kd]
         self._ff = inertia if self.feedforward else [0.0] * 6
 
     def step(
@@ -103,38 +105,43 @@ class Drives:
         Six axes: numpy's per-call cost would be the whole cost of a 6-element step, so the
         servo runs on Python floats (IEEE doubles too); MuJoCo does the solve.
         """
-        kp, kc, kd, ff = self.kp, self.corner * self.h, self._kd, self._ff
+        kp, kd, kdc, ff = self.kp, self._kd, self._kdc, self._ff
         lims, fc, hump, fv = self._lims, self._fc, self._hump, self._fv
         inv_vs, inv_vst = 1.0 / self.smoothing, 1.0 / self.stribeck
         q, qd = d.qpos.tolist(), d.qvel.tolist()
         integral = self._integral
-        drive, f0, slope, damping, push = [0.0] * 6, [0.0] * 6, [0.0] * 6, [0.0] * 6, [0.0] * 6
+        drive, f0, slope, damping, push = [], [], [], [], []
         tanh, exp = math.tanh, math.exp
         for j in range(6):
             v, top = qd[j], lims[j]
             v_cmd = qd_ref[j] + kp * (ref[j] - q[j])
             # anti-windup: the integral never asks for more than the motor can give
-            i = integral[j] + kd[j] * kc * (v_cmd - v)
+            i = integral[j] + kdc[j] * (v_cmd - v)
             i = top if i > top else (-top if i < -top else i)
             integral[j] = i
-            drive[j] = a = kd[j] * v_cmd + i + ff[j] * qdd_ref[j]
+            a = kd[j] * v_cmd + i + ff[j] * qdd_ref[j]
             x = v * inv_vst
             t, e = tanh(v * inv_vs), exp(-x * x)
             dry = fc[j] + hump[j] * e
-            f0[j] = f = dry * t + fv[j] * v
-            s = dry * (1.0 - t * t) * inv_vs - hump[j] * e * 2.0 * x * inv_vst * t + fv[j]
-            slope[j] = s = s if s > 0.0 else 0.0  # a falling Stribeck branch stays explicit
-            damping[j] = kd[j] + s
-            push[j] = a - f + s * v + external[j]
-        held: dict[int, float] = {}  # the torque of saturated axes
+            f = dry * t + fv[j] * v
+            sl = dry * (1.0 - t * t) * inv_vs - 2.0 * hump[j] * e * x * inv_vst * t + fv[j]
+            sl = sl if sl > 0.0 else 0.0  # a falling Stribeck branch stays explicit
+            drive.append(a)
+            f0.append(f)
+            slope.append(sl)
+            damping.append(kd[j] + sl)
+            push.append(a - f + sl * v + external[j])
         state = (d.qpos.copy(), d.qvel.copy(), d.time)
+        held: dict[int, float] = {}  # the torque of saturated axes
         while True:
             m.dof_damping[:] = damping
             d.qfrc_applied[:] = push
             mujoco.mj_step(m, d)
             qn = d.qvel.tolist()
-            tau = [held[j] if j in held else drive[j] - kd[j] * qn[j] for j in range(6)]
-            over = [j for j in range(6) if j not in held and abs(tau[j]) > lims[j]]
+            tau = [drive[j] - kd[j] * qn[j] for j in range(6)]
+            for j, lim in held.items():
+                tau[j] = lim
+            over = [j for j in range(6) if abs(tau[j]) > lims[j] and j not in held]
             if not over:
                 break
             for j in over:  # redo the step with those axes saturated: a constant torque
