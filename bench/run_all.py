@@ -35,6 +35,7 @@ SCRIPTS = [
     ("Emulator", "emu_throughput.py"),
     ("Kinematics", "kinematics.py"),
     ("Simulated robot CPU", "plant_cpu.py"),
+    ("Plant with payload", "plant_settle.py"),
     ("A cell of robots", "cell_cpu.py"),
     ("CLI", "cli_startup.py"),
     ("Latency profile", "latency_pacing.py"),

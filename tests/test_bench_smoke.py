@@ -25,6 +25,7 @@ BENCH = Path(__file__).resolve().parents[1] / "bench"
         ("emu_throughput.py", "requests/s, 10 clients"),
         ("kinematics.py", "Jacobian"),
         ("plant_cpu.py", "dynamic plant, moving"),
+        ("plant_settle.py", "poses settled within 2 s"),
         ("cli_startup.py", "kvp read start-up"),
         ("latency_pacing.py", "paced"),
         ("motion_kss.py", "A2 reversal"),

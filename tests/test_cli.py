@@ -86,6 +86,6 @@ def test_usage_error_exit_code() -> None:
 def test_embedded_emulator() -> None:
     res = run("--emulate", "--plant", "ideal", "read", "$TORQUE_AXIS_ACT[]")
     assert res.exit_code == 0, res.output
-    assert res.stdout.startswith("0.0 -24.7800 -25.5000")
+    assert res.stdout.startswith("0.0 -24.7805920 -25.5219193")  # the model's, not the table's
     # the embedded emulator stops with the command, even when the CLI runs in-process
     assert not [t for t in threading.enumerate() if t.name == "kukavarproxy-emu"]

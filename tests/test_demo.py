@@ -3,9 +3,13 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
+import pytest
+from pyopenshowvar_apps.casestudies import teleop_cli
 from pyopenshowvar_apps.casestudies.common import CaseResult, summary_table, verdict
 from pyopenshowvar_apps.cli import app
+from pyopenshowvar_apps.common import Opts
 from rich.console import Console
 from typer.testing import CliRunner
 
@@ -41,6 +45,8 @@ def test_demo_quick_linefollow_prints_table(tmp_path) -> None:
     assert res.exit_code == 0, res.output
     out = res.output
     assert "dynamic plant" in out and "'kvp' latency" in out and "seed 3" in out
+    # by default the physical robot is not the nominal model: a calibration error, seeded
+    assert "calibration error seed 3" in out
     assert "NOT" in out and "representative" in out  # --quick says so
     assert "ours vs thesis" in out and "max_error_mm" in out and "< 5" in out
     assert "better" in out and "nan" not in out
@@ -54,3 +60,54 @@ def test_demo_quick_linefollow_prints_table(tmp_path) -> None:
     for name in listed:  # the last lines are the files written, all there, no nested folders
         assert (tmp_path / name).stat().st_size > 0
         assert name.count("linefollow") == 2  # linefollow/linefollow_*.*, not deeper
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["demo", "--calibration-error", "x"],
+        ["demo", "--calibration-error", "-1"],
+        ["linefollow", "--calibration-error", "x"],
+        ["teleop", "--calibration-error", "1.5"],
+        ["haptic", "--calibration-error", "nope"],
+    ],
+)
+def test_calibration_error_option_is_validated(args: list[str]) -> None:
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 2 and "is not a seed" in res.output, res.output
+
+
+def test_case_study_commands_build_the_robot_they_were_asked_for() -> None:
+    """``kvp haptic --emulate --calibration-error 7``: the embedded robot is the one seed 7
+    draws (not the nominal one); ``off`` and no option: the nominal robot."""
+    seen: list[Any] = []
+
+    async def probe(kvp: Any, emu: Any) -> CaseResult:
+        await kvp.read("$PRO_NAME1[]")
+        seen.append(emu.emulator.robot.plant.calibration_seed)
+        return CaseResult("probe")
+
+    Opts.reset("127.0.0.1", 7000, 1.0, emulate=True)
+    try:
+        for option in ("7", "off", None):
+            teleop_cli._run("actuator", False, probe, calibration=option)
+    finally:
+        Opts.reset("127.0.0.1", 7000, 2.0, emulate=False)
+    assert seen == [7, None, None]
+
+
+def test_seed_also_draws_the_heave_sea(monkeypatch: pytest.MonkeyPatch, tmp_path) -> None:
+    """``kvp demo --seed 5``: the heave section's sea (and its rig's noise) is drawn with 5
+    too, not a fixed 19 (the section itself runs 15 s of real time: only its inputs here)."""
+    import pyopenshowvar_apps.heave.demo as heave_demo
+    from pyopenshowvar_apps.demo import Conditions, _heave
+
+    asked: list[int] = []
+
+    def record(out: Any, speed: float, quick: bool, *, plant: str, seed: int) -> CaseResult:
+        asked.append(seed)
+        return CaseResult("heave")
+
+    monkeypatch.setattr(heave_demo, "demo_case", record)
+    _heave(tmp_path, Conditions("dynamic", 5, 1.0, True))
+    assert asked == [5]

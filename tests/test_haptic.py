@@ -13,7 +13,6 @@
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -33,7 +32,7 @@ from pyopenshowvar_apps.casestudies.haptic_model import (
 
 from kukavarproxy_emu import Obstacle
 from kukavarproxy_emu.motion import Robot
-from kukavarproxy_emu.plant.params import bodies_of, load_params
+from kukavarproxy_emu.plant.params import make_bodies
 from kukavarproxy_emu.store import VariableStore
 from pyopenshowvar import Client
 from pyopenshowvar.kinematics import KR6R900SIXX as KR6
@@ -78,8 +77,12 @@ def test_nominal_model_is_point_mass_newton_euler(load: Load | None) -> None:
     """Gravity is the library's; the inertia of the point masses matches an independent
     recursive Newton–Euler run on the same masses with zero link inertia tensors."""
     dyn = NominalDynamics(KR6, load)
-    bodies = bodies_of(KR6, load_params())
-    points = replace(bodies, inertia=np.zeros_like(bodies.inertia))
+    # the library's own masses and centres (not the plant's file) as point masses
+    points = make_bodies(
+        np.column_stack([KR6.a, KR6.alpha, KR6.d, KR6.offset]), KR6.sign, KR6.flange,
+        mass=KR6.link_mass, com_base=KR6.link_origin + KR6.link_com, inertia=np.zeros((6, 3)),
+        armature=np.zeros(6), max_torque=KR6.max_torque,
+    )  # fmt: skip
     payload = None
     if load is not None:
         from kukavarproxy_emu.plant.mjcf import Payload
@@ -150,7 +153,10 @@ def test_estimator_on_the_dynamic_plant_meets_the_targets() -> None:
         free += [sim.step(inc) for _ in range(30)]
     base = JointTerms(offset=offset, noise=noise)
     terms, resid = identify(dyn, [f[0] for f in free], [f[1] for f in free], base)
-    assert np.all(resid[:3] < 3 * noise[:3]), (resid, noise)  # the model explains the motion
+    # the plant's friction is a Stribeck curve, the app's a friction map: not the same law,
+    # yet the map explains most of what the rigid model leaves of the torque
+    left = np.array([t - offset - dyn.rigid(m) for m, t, *_ in free])
+    assert np.all(resid < 0.2 * np.sqrt(np.mean(left**2, axis=0))), resid
     est, tare_only = ForceEstimator(dyn, terms), ForceEstimator(dyn, base)
     averager = RestAverage(est)
     moving, moving_tare, settled, peak = [], [], [], 0.0

@@ -113,6 +113,42 @@ def plant_choice(value: str) -> str:
     return value
 
 
+def calibration_choice(value: str | None) -> str | None:
+    """Validate a ``--calibration-error`` option (typer callback): a seed (an integer >= 0) or
+    ``off``; None (not given) passes through. :func:`calibration_seed` converts it."""
+    if value is None or value.lower() in ("off", "none"):
+        return value
+    try:
+        seed = int(value)
+    except ValueError:
+        seed = -1
+    if seed < 0:
+        raise typer.BadParameter(f"{value!r} is not a seed (an integer >= 0) or 'off'")
+    return value
+
+
+def calibration_seed(value: str | None, default: int | None = None) -> int | None:
+    """The calibration-error seed of a validated ``--calibration-error`` (None: the nominal
+    robot, a perfect model); ``default`` when the option was not given."""
+    if value is None:
+        return default
+    return None if value.lower() in ("off", "none") else int(value)
+
+
+#: ``--calibration-error`` of the case-study commands (used with ``--emulate``).
+CALIBRATION_HELP = (
+    "With --emulate: the physical robot differs from the nominal model (geometry, masses, "
+    "inertia, friction) by a realistic error drawn with this seed; 'off': a perfect model."
+)
+
+
+def calibration_option(help_text: str = CALIBRATION_HELP) -> Any:
+    """The ``--calibration-error SEED|off`` option (for ``Annotated[str | None, ...]``)."""
+    return typer.Option(
+        "--calibration-error", metavar="SEED|off", callback=calibration_choice, help=help_text
+    )
+
+
 def check_port(value: int) -> int:
     """typer callback: a TCP/UDP port a client can connect to (1..65535)."""
     if not 1 <= value <= 0xFFFF:

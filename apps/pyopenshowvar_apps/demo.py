@@ -3,8 +3,12 @@
 Each case study gets a fresh in-process emulator (:class:`EmulatorThread`) with the program
 its KRL side needs (``cart_path`` for line following, ``ext_move_axis`` for teleoperation,
 ``actuator`` for the haptic loop), the ``kvp`` latency profile (so access times look like a
-KRC4 over Ethernet), the ``--plant`` (dynamic by default), the ``--seed`` (sensor noise and
-latency draws) and the ``--speed`` factor. A fresh emulator per study means no study sees
+KRC4 over Ethernet), the ``--plant`` (dynamic by default), the ``--seed`` (sensor noise,
+latency draws, the line image and the heave sea) and the ``--speed`` factor. By default the
+dynamic plant is a physical robot that differs from the nominal model the controller and the
+apps use by a realistic calibration error drawn with the same seed (``--calibration-error``;
+``off`` for a perfect model), so no figure holds merely because the app's model is the
+simulation's. A fresh emulator per study means no study sees
 another one's leftovers (a path flag, a wrench, a stopped program). The case studies run
 through the public client exactly as against a real robot; what they are scored against comes
 from outside our code: the generated image's true centreline and the plant's physical TCP
@@ -27,7 +31,7 @@ import typer
 from rich.console import Console
 
 from pyopenshowvar_apps.casestudies.common import CaseResult, output_dir, summary_table
-from pyopenshowvar_apps.common import plant_choice
+from pyopenshowvar_apps.common import calibration_option, calibration_seed, plant_choice
 
 __all__ = ["demo", "run_demo"]
 
@@ -44,6 +48,20 @@ class Conditions:
     seed: int
     speed: float
     quick: bool
+    #: Seed of the physical robot's calibration error (None: the nominal robot).
+    calibration: int | None = None
+
+    def describe(self) -> str:
+        if self.plant != "dynamic":
+            robot = "no calibration error (no physics)"
+        elif self.calibration is None:
+            robot = "calibration error off (a perfect model)"
+        else:
+            robot = f"calibration error seed {self.calibration}"
+        return (
+            f"{self.plant} plant, {robot}, '{LATENCY}' latency, seed {self.seed}, "
+            f"speed {self.speed:g}x"
+        )
 
 
 def _with_emulator(
@@ -69,6 +87,7 @@ def _with_emulator(
         plant=cond.plant,
         seed=cond.seed,
         obstacles=obstacles if cond.plant == "dynamic" else (),
+        calibration_error=cond.calibration if cond.plant == "dynamic" else None,
     )
     with EmulatorThread(config, store=store) as emu:
         plant = emu.emulator.robot.plant if emu.emulator.robot is not None else None
@@ -164,7 +183,7 @@ def _heave(out: Path, cond: Conditions) -> CaseResult:
     # its own embedded rig (emulator + platform simulator), always in real time
     from pyopenshowvar_apps.heave.demo import demo_case
 
-    return demo_case(out, cond.speed, cond.quick, plant=cond.plant)
+    return demo_case(out, cond.speed, cond.quick, plant=cond.plant, seed=cond.seed)
 
 
 #: (sub-folder, title, runner) in the thesis' order.
@@ -201,14 +220,13 @@ def run_demo(
     console: Console | None = None,
     plant: str = "dynamic",
     seed: int = 1,
+    calibration: int | None = None,
 ) -> list[CaseResult]:
-    """Run the case studies (``only``: sub-folder names) and print the summary table."""
+    """Run the case studies (``only``: sub-folder names) and print the summary table;
+    ``calibration``: the seed of the physical robot's calibration error (None: off)."""
     console = console or Console()
-    cond = Conditions(plant, seed, speed, quick)
-    console.print(
-        f"emulated robot: {plant} plant, '{LATENCY}' latency profile (KRC4 + KVP 9.0), "
-        f"seed {seed}, speed {speed:g}x"
-    )
+    cond = Conditions(plant, seed, speed, quick, calibration if plant == "dynamic" else None)
+    console.print(f"emulated robot: {cond.describe()} (latency profile: KRC4 + KVP 9.0)")
     if quick:
         console.print(
             "[yellow]--quick: short runs on a sped-up robot; the figures are NOT "
@@ -232,10 +250,9 @@ def run_demo(
         console.print(f"  done in {time.monotonic() - t0:.1f} s, {len(result.files)} files")
         results.append(result)
     console.print(summary_table(results, title="JOpenShowVar case studies: ours vs thesis"))
-    console.print(
-        f"under: {plant} plant, '{LATENCY}' latency, seed {seed}, speed {speed:g}x"
-        + (" (--quick: not representative)" if quick else "")
-    )
+    console.print(f"under: {cond.describe()}" + (" (--quick: not representative)" if quick else ""))
+    if "heave" in [r.name for r in results]:
+        console.print(f"heave: its own rig (emulator + platform), the nominal robot, seed {seed}")
     files = [f for r in results for f in r.files]
     console.print(f"files written under {Path(out).resolve()}:", soft_wrap=True)
     for f in files:
@@ -268,10 +285,21 @@ def demo(
         ),
     ] = "dynamic",
     seed: Annotated[
-        int, typer.Option("--seed", help="Seed of the sensor noise, latency and line image.")
+        int,
+        typer.Option("--seed", help="Seed of the sensor noise, latency, line image and heave sea."),
     ] = 1,
+    calibration_error: Annotated[
+        str | None,
+        calibration_option(
+            "Seed of the physical robot's calibration error (default: --seed), 'off' for a "
+            "perfect model (dynamic plant)."
+        ),
+    ] = None,
 ) -> None:
     """Run every case study against an embedded emulator and print ours vs the thesis."""
     if quick and speed == 1.0:
         speed = 4.0
-    run_demo(out, speed=speed, quick=quick, only=only, plant=plant, seed=seed)
+    calibration = calibration_seed(calibration_error, default=seed)
+    run_demo(
+        out, speed=speed, quick=quick, only=only, plant=plant, seed=seed, calibration=calibration
+    )

@@ -45,6 +45,7 @@ from pyopenshowvar.kinematics import (
 from pyopenshowvar.krl import Struct
 
 from ..store import VariableStore
+from .dynamics import ControllerDynamics
 from .path import LinGeometry, PathLimits, PathRefused, joint_path, leave_wrist_singularity
 from .profiles import FloatArray, Profile
 from .publish import Publisher
@@ -155,6 +156,9 @@ class MotionKernel(Publisher):
         self.noise = noise
         self.inertia = np.asarray(inertia, dtype=np.float64)
         self._rng = np.random.default_rng(seed)
+        #: The controller's dynamic model (accelerations adapted to $LOAD); None without
+        #: machine data for ``model``.
+        self.dynamics = ControllerDynamics.for_model(model)
         q0 = axes_of(store.get("$AXIS_ACT"), "$AXIS_ACT")
         self.q = q0.copy()
         self.qd = np.zeros(6)  # deg/s
@@ -273,6 +277,9 @@ class MotionKernel(Publisher):
         self.check_limits(q1, label)
         v, a = self._limits()
         limits = ConstLimits(delta, v, a)
+        if self.dynamics is not None:
+            self.dynamics.use_load(self.store.get("$LOAD"))
+            limits.adapt(*self.dynamics.ptp_limits(self.planned_q, delta, limits.v, limits.a))
         curve, bw = next_result(limits.plan())
         cptp = float(self._apo()["CPTP"])  # type: ignore[arg-type]
         lead = float(np.max(np.abs(delta)))
@@ -397,6 +404,11 @@ class MotionKernel(Publisher):
             limits = PathLimits(
                 self.model, s, q, geo, v, a, self.model.max_speed, self.model.max_accel
             )
+            if self.dynamics is not None:
+                yield  # the limits above were one slice; the motors' rows are more
+                self.dynamics.use_load(self.store.get("$LOAD"))
+                limits.constrain(*(yield from self.dynamics.path_rows(q, limits.qp, limits.qpp)))
+                yield
             curve, bw = yield from limits.plan()
             profile = Profile(*curve)
         except PathRefused as exc:
@@ -449,6 +461,17 @@ class MotionKernel(Publisher):
             self.active.clear()
             self._q_base = self.q.copy()
         self.planned_q = self.active[-1].end_q.copy() if self.active else self.q.copy()
+
+    def reset_to(self, q: FloatArray) -> None:
+        """Forget every motion and stand at ``q`` (deg): the set-point after the drives were
+        switched off (a fault), where the arm physically is."""
+        self.stop(hard=True)
+        self.q = np.array(q, dtype=np.float64)
+        self.planned_q = self.q.copy()
+        self._q_base = self.q.copy()
+        self.qd = np.zeros(6)
+        self.qdd = np.zeros(6)
+        self._still_q = self._still_planned = None
 
     @property
     def at_rest(self) -> bool:

@@ -49,7 +49,7 @@ MAX_NODES = 6000
 #: Poses per IK batch (well under 1 ms each).
 IK_BATCH = 32
 #: Nodes per slice of the phase-plane passes.
-PASS_CHUNK = 100
+PASS_CHUNK = 40
 #: Fractions of the axis limits the planner uses: the IK path bends slightly between nodes.
 SPEED_MARGIN = 0.99
 ACCEL_MARGIN = 0.95
@@ -119,11 +119,12 @@ def _chain(q0: FloatArray, q: FloatArray) -> FloatArray:
 
 def _singularity(model: RobotModel, q: FloatArray) -> str:
     """Which of the KSS singularities a joint position is near."""
+    # plain ASCII: the text ends up in $EMU_MESSAGE[], a KRL CHAR array (no Greek letters)
     if abs(q[4]) < 10.0:
-        return "α5 (wrist axes, A5 = 0)"
+        return "wrist (A5 = 0)"
     if abs(q[2] - model.status_phi) < 10.0:
-        return "α2 (arm stretched)"
-    return "α1 (wrist centre above axis 1)"
+        return f"arm-stretched (A3 = {model.status_phi:.1f})"
+    return "overhead (wrist centre above A1)"
 
 
 def joint_path(
@@ -196,6 +197,18 @@ def joint_path(
         q = _chain(q0, np.vstack([q, qm])[order])
 
 
+def _pair_cap(
+    alp: FloatArray, beta_lo: FloatArray, gam: FloatArray, beta_hi: FloatArray
+) -> FloatArray:
+    """The largest ṡ² per node at which every lower bound ``α_j + β_j·ṡ²`` stays below every
+    upper bound ``γ_m + β_m·ṡ²``: ``(β_j − β_m)·ṡ² ≤ γ_m − α_j`` for each pair."""
+    db = beta_lo[:, :, None] - beta_hi[:, None, :]
+    room = gam[:, None, :] - alp[:, :, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        pair = np.where(db > 0, room / db, np.inf)
+    return np.asarray(np.min(pair, axis=(1, 2)))
+
+
 class PathLimits:
     """Speed cap and acceleration bounds of the path parameter at each node of a LIN.
 
@@ -224,12 +237,14 @@ class PathLimits:
         w0, w1 = span[:-1, None], span[1:, None]
         qp[1:-1] = (self.chord[:-1] * w1 + self.chord[1:] * w0) / (w0 + w1)
         qpp = np.zeros_like(q)
+        lo = hi = qpp
         if len(span) > 1:
             qpp[1:-1] = (self.chord[1:] - self.chord[:-1]) / (0.5 * (w0 + w1))
             qpp[0], qpp[-1] = qpp[1], qpp[-2]
             # the curvature changes fast near a singularity: bound each node by its neighbours'
             near = np.stack([np.roll(qpp, 1, axis=0), qpp, np.roll(qpp, -1, axis=0)])
             near[0, 0], near[2, -1] = qpp[0], qpp[-1]
+            lo, hi = near.min(axis=0), near.max(axis=0)
             pick = np.argmax(np.abs(near), axis=0)
             qpp = np.take_along_axis(near, pick[None], axis=0)[0]
         self.qp, self.qpp = qp, qpp
@@ -247,28 +262,57 @@ class PathLimits:
             v_int = np.min(v_axis * SPEED_MARGIN / np.abs(self.chord), axis=1)
         v_node = np.minimum(np.append(v_int, v_int[-1]), np.insert(v_int, 0, v_int[0]))
         xcap = np.minimum(v_node, v_cp) ** 2
-        # acceleration rows: 6 axes + the Cartesian one
+        # acceleration rows: |q'·s̈ + q''·ṡ²| ≤ a per axis, for q' between the chords on either
+        # side of the node and q'' between its neighbours' extremes (the nodes only sample a
+        # path whose slope and curvature vary in between: near a singularity the two terms
+        # nearly cancel, and one sample of each would under- or over-state either); the
+        # constraint is linear in (q', q''), so the four corners bound the whole range
         amax = self.a_axis = a_axis * ACCEL_MARGIN
-        ap = np.abs(qp)
-        moving = ap > 1e-9
-        with np.errstate(divide="ignore", invalid="ignore"):
-            gam = np.where(moving, amax / ap, _BIG)
-            beta = np.where(moving, -qpp / qp, 0.0)
-            still = np.where(~moving & (np.abs(qpp) > 0), amax / np.abs(qpp), np.inf)
+        slopes = (np.vstack([self.chord[:1], self.chord]), np.vstack([self.chord, self.chord[-1:]]))
+        gams, betas, stills = [], [], []
+        for slope in slopes:
+            for curve in (lo, hi):
+                moving = np.abs(slope) > 1e-9
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    gams.append(np.where(moving, amax / np.abs(slope), _BIG))
+                    betas.append(np.where(moving, -curve / slope, 0.0))
+                    stills.append(
+                        np.where(~moving & (np.abs(curve) > 0), amax / np.abs(curve), np.inf)
+                    )
+        gam, beta, still = np.hstack(gams), np.hstack(betas), np.hstack(stills)
         a_s = min(a_cp, _BIG)
         gam = np.hstack([gam, np.full((len(s), 1), a_s)])
         beta = np.hstack([beta, np.zeros((len(s), 1))])
-        alp = -gam
-        # (β_j − β_m)·x ≤ γ_m − α_j for every pair of a lower and an upper bound
-        db = beta[:, :, None] - beta[:, None, :]
-        room = gam[:, None, :] - alp[:, :, None]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            pair = np.where(db > 0, room / db, np.inf)
-        xcap = np.minimum(xcap, np.min(pair, axis=(1, 2)))
-        xcap = np.minimum(xcap, np.min(still, axis=1))
+        self._xcap0 = np.minimum(xcap, np.min(still, axis=1))
+        self._rows = (-gam, beta, gam)
+        self._finish()
+
+    def constrain(
+        self, alp: FloatArray, beta: FloatArray, gam: FloatArray, cap: FloatArray
+    ) -> None:
+        """Add rows ``α + β·ṡ² ≤ s̈ ≤ γ + β·ṡ²`` (``(nodes, k)`` arrays) and a cap on ṡ² per
+        node (the motors' torque, :meth:`.dynamics.ControllerDynamics.path_rows`)."""
+        a0, b0, g0 = self._rows
+        # only the pairs that involve a new row can lower the cap further
+        xcap = np.minimum(self.xcap, cap)
+        for lo_rows, hi_rows in (
+            ((alp, beta), (g0, b0)),
+            ((a0, b0), (gam, beta)),
+            ((alp, beta), (gam, beta)),
+        ):
+            xcap = np.minimum(xcap, _pair_cap(*lo_rows, *hi_rows))
+        self._rows = (np.hstack([a0, alp]), np.hstack([b0, beta]), np.hstack([g0, gam]))
+        self._set_cap(xcap)
+
+    def _finish(self) -> None:
+        alp, beta, gam = self._rows
+        self._set_cap(np.minimum(self._xcap0, _pair_cap(alp, beta, gam, beta)))
+
+    def _set_cap(self, xcap: FloatArray) -> None:
+        alp, beta, gam = self._rows
         self.xcap = xcap
         self._alp, self._beta, self._gam = alp.tolist(), beta.tolist(), gam.tolist()
-        self._s, self._cap = s.tolist(), xcap.tolist()
+        self._s, self._cap = self.s.tolist(), xcap.tolist()
 
     # --- bounds ---------------------------------------------------------------------------
     def _lo(self, k: int, x: float) -> float:

@@ -94,13 +94,9 @@ class Publisher:
             return
         self._published = key
         tool, base = self._read_frames()
-        wrench = self.wrench()
         model, q = self.model, self.q
         q_meas = q + self._rng.normal(0.0, self.noise, 6) if self.noise else q
-        torque = gravity_torques(model, q, Load.from_krl(self.store.get("$LOAD")))
-        torque = torque + model.torque_sign * self.inertia * np.radians(self.qdd)
-        if np.any(wrench):
-            torque = torque + wrench_to_torques(model, q, wrench, tool)
+        torque = self._torque(tool)
         tcp = self._tcp_position(q)
         vel_tcp = float(np.linalg.norm(tcp - self._tcp)) / self.ipo / 1000.0
         self._tcp = tcp
@@ -114,6 +110,24 @@ class Publisher:
         store.set_system("$VEL_AXIS_ACT", [*(self.qd / model.max_speed * 100.0), *_E6])
         store.set_system("$TORQUE_AXIS_ACT", [*torque, *_E6])
         store.set_system("$VEL_ACT", vel_tcp)
+
+    def _torque(self, tool: FloatArray) -> FloatArray:
+        """The ideal plant's motor torques: statics with $LOAD and EMU_WRENCH, plus the
+        diagonal inertia times the commanded acceleration."""
+        model, q = self.model, self.q
+        torque = gravity_torques(model, q, Load.from_krl(self.store.get("$LOAD")))
+        torque = torque + model.torque_sign * self.inertia * np.radians(self.qdd)
+        wrench = self.wrench()
+        if np.any(wrench):
+            torque = torque + wrench_to_torques(model, q, wrench, tool)
+        return np.asarray(torque + 0.0)  # + 0.0: no "-0.0" where a torque is zero
+
+    def publish_torque(self) -> None:
+        """Write the ideal plant's ``$TORQUE_AXIS_ACT`` for the state as it is (start-up: the
+        model's torques, not the static table's rounded ones); the other variables already
+        read what the model gives."""
+        torque = self._torque(self._read_frames()[0])
+        self.store.set_system("$TORQUE_AXIS_ACT", [*torque, *_E6])
 
     def _pos(self, q: FloatArray, tool: FloatArray, base: FloatArray) -> E6Pos:
         s, t = status_turn(self.model, q)

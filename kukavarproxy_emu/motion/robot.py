@@ -7,7 +7,8 @@ the SPS (by default Algorithm 4.11, OUTPUT_VARS to $OUT); the kernel interpolate
 cycle and publishes $AXIS_ACT, $POS_ACT, $TORQUE_AXIS_ACT, ...
 
 **Errors.** A refused motion (software limit switch, unreachable pose, uninitialised target)
-stops the program like a KRC: the refused motion never starts, the one already running ends
+or an axis that cannot follow (the plant's following-error monitoring: the brakes close,
+``$DRIVES_ON`` = FALSE) stops the program like a KRC: the refused motion never starts, the one already running ends
 exactly on its (valid) end point, ``$PRO_STATE1`` = ``#P_STOP``, ``$STOPMESS`` = TRUE and the
 message text is in the read-only ``$EMU_MESSAGE[]``. Writing ``EMU_RESTART = TRUE`` (or
 :meth:`Robot.restart`) acknowledges the message and starts the program again.
@@ -86,6 +87,10 @@ class Robot:
             obstacles=obstacles,
         )
         self.kernel.plant = self.plant
+        if self.plant is not None:
+            self.plant.on_fault = self._drive_fault
+        else:
+            self.kernel.publish_torque()  # the model's start-up torques (both plants)
         if isinstance(program, Program):
             self.program = program
         else:
@@ -165,7 +170,7 @@ class Robot:
         self._quiet = (
             store.mutations - store.stale_marks - sps_changes == changes
             and self.kernel.at_rest
-            and (plant is None or plant.resting)
+            and (plant is None or plant.resting or plant.braked)
             and skips is not None
             and now is not None
             and now[0] == skips[0] + skips[2]
@@ -233,8 +238,19 @@ class Robot:
         self._set("$STOPMESS", True)
         self._set("$PRO_STATE1", KrlEnum("P_STOP"))
 
+    def _drive_fault(self, message: str) -> None:
+        """An axis could not follow: the plant's brakes have closed. The set-point jumps to
+        where the arm stands (drives off, as on a KRC after a following error) and the program
+        stops with the message."""
+        assert self.plant is not None
+        self.kernel.reset_to(self.plant.position)
+        self.fault(message)
+        self._set("$DRIVES_ON", False)
+
     def restart(self) -> None:
         """Acknowledge the message and start the program again (from the current position)."""
+        if self.plant is not None and self.plant.braked:
+            self.kernel.reset_to(self.plant.release())  # drives on where the arm stands
         self.message = ""
         self._set("$EMU_MESSAGE[]", "")
         self._set("$STOPMESS", False)

@@ -12,7 +12,10 @@ segment and the head of the next one so that, from the moment the current one ha
 accelerates linearly from rest, over the same time ``T``. During that window every axis speed is
 a convex combination of the two end speeds (never above a limit) and every acceleration is
 ``(v_next − v_cur) / T``; if that exceeds a limit (a reversal, a sharp corner), both segments
-enter the window slower — the distance stays where ``$APO`` says, the speed gives.
+enter the window slower — the distance stays where ``$APO`` says, the speed gives. A segment
+never starts slowing down for its next window before the window it was blended in by has
+ended (three superposed motions would add their accelerations): if it would have to, it stops
+exactly instead.
 
 LIN orientation is interpolated as a rotation about one fixed axis (the axis-angle of
 ``R_end · R_startᵀ``, applied in the base frame), i.e. a slerp: the orientation turns at a
@@ -46,6 +49,13 @@ class ConstLimits:
         self.delta = delta
         self.a_axis = a_axis
         self.v, self.a = scalar_limits(delta, v_axis, a_axis)
+
+    def adapt(self, v: float, a: float) -> None:
+        """Lower the limits of ``s`` to ``(v, a)`` (the motors' torque, :mod:`.dynamics`); the
+        axis accelerations, which blends and override ramps respect, scale with ``a``."""
+        if a < self.a:
+            self.a_axis = self.a_axis * (a / self.a)
+        self.v, self.a = min(v, self.v), min(a, self.a)
 
     def xcap_on(self, s0: float, s1: float) -> float:
         return self.v * self.v
@@ -108,6 +118,9 @@ class Segment:
     #: Profile time elapsed (s of planned time, at 100 % override).
     t: float = 0.0
     blend_at: float | None = None
+    #: Where (in s) the window in which this segment was blended in ends: the motion before
+    #: it is done there, and this segment's own tail window may not begin earlier.
+    head_end: float = 0.0
 
     @property
     def duration(self) -> float:
@@ -183,6 +196,12 @@ def blend(cur: Segment, nxt: Segment, progress: Callable[[], float]) -> Generato
     except (ValueError, PathRefused):
         return False
     mid = pl_min(tail, old)
+    # braking starts at the node before the first one the new curve passes slower
+    slower = np.flatnonzero(mid[1] < np.interp(mid[0], *old) * (1.0 - 1e-9) - 1e-12)
+    if len(slower) and mid[0][max(int(slower[0]) - 1, 0)] < cur.head_end - 1e-9:
+        # slowing down for this window would begin inside the window cur was blended in by:
+        # three motions would superpose and their accelerations add. Stop exactly instead.
+        return False
     keep = old[0] < mid[0][0]
     new_cur = (
         np.concatenate([old[0][keep], mid[0], [1.0]]),
@@ -198,6 +217,7 @@ def blend(cur: Segment, nxt: Segment, progress: Callable[[], float]) -> Generato
         return False
     cur.profile, nxt.profile = cur_profile, nxt_profile
     cur.blend_at = cur_profile.time_at(s_b)
+    nxt.head_end = frac_b
     return True
 
 

@@ -10,13 +10,14 @@ into what a KRC4 measures and publishes:
   external wrenches and contact with :class:`Obstacle` objects, optionally with a calibration
   error (the physical robot differs from the nominal model).
 
-The parameters and their sources are in ``kr6r900sixx_dynamics.toml``; see
+The plant's own parameters and their sources are in ``kr6r900sixx_dynamics.toml`` (not the
+client library's kinematic model: the plant is the world the apps estimate); see
 docs/emulator-robot.md. MuJoCo is imported only when a dynamic plant is built.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Protocol
 
 from pyopenshowvar.extras import require
@@ -39,12 +40,21 @@ PLANTS = ("ideal", "dynamic")
 
 
 class Plant(Protocol):
-    """What the motion kernel needs of a plant: one call per IPO cycle."""
+    """What the motion kernel needs of a plant: one call per IPO cycle; and what the robot
+    needs when an axis cannot follow (``on_fault``, the brakes, :meth:`release`)."""
 
     kind: str
     truth: Truth
+    resting: bool
+    braked: bool
+    on_fault: Callable[[str], None] | None
+
+    @property
+    def position(self) -> npt.NDArray[np.float64]: ...
 
     def step(self, q_set_deg: npt.NDArray[np.float64]) -> None: ...
+
+    def release(self) -> npt.NDArray[np.float64]: ...
 
 
 def make_plant(

@@ -1,13 +1,19 @@
 """The dynamic plant: MuJoCo rigid-body arm + joint servos + friction + sensors.
 
 Every IPO cycle :meth:`DynamicPlant.step` receives the kernel's set-point. The drives
-fine-interpolate it linearly over the cycle and a cascaded servo per axis (position P →
-velocity PI, velocity and acceleration feed-forward; gains from the model file) computes the
-motor torque each physics step. MuJoCo integrates the arm under that torque, gravity, the
-regularised Coulomb + viscous joint friction, the payload ($LOAD, a welded body), the external
-wrench ``EMU_WRENCH`` and contact with :class:`~.contact.Obstacle` objects. What the controller
-publishes is what its sensors see: encoder positions (+ seeded noise), the motor torques
-(+ seeded noise), velocities.
+(:mod:`.drives`) fine-interpolate it linearly over the cycle and a cascaded servo per axis
+computes the motor torque each physics step, saturated at the motor's limit. MuJoCo integrates
+the arm under that torque, gravity, the Stribeck joint friction, the payload ($LOAD, a welded
+body), the external wrench ``EMU_WRENCH`` and contact with :class:`~.contact.Obstacle`
+objects. What the controller publishes is what its sensors see: encoder positions (+ seeded
+noise), the motor torques (+ seeded noise), velocities.
+
+**Following-error monitoring.** An axis that falls more than the model file's
+``following_error_deg`` behind its set-point cannot follow (a wrench or load beyond its motor):
+the brakes close at once (the arm is held where it is, the motor torque drops to 0) and
+:attr:`DynamicPlant.on_fault` reports ``Ackn. max. following error exceeded An`` so the
+controller stops. :meth:`DynamicPlant.release` opens the brakes again when the message is
+acknowledged.
 
 **At rest** (set-point constant, servo converged) the physics is not stepped: the state is
 snapped onto the set-point and the motor torque is the exact static torque (gravity + load +
@@ -23,9 +29,8 @@ The readings are :mod:`.sensors`.
 from __future__ import annotations
 
 import logging
-import math
 import secrets
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import mujoco
@@ -36,8 +41,9 @@ from pyopenshowvar.krl import Struct
 
 from ..store import VariableStore
 from .contact import Obstacle, contact_force
+from .drives import Drives
 from .mjcf import Payload, build_mjcf, frame_matrix, payload_of
-from .params import Bodies, FloatArray, PlantParams, bodies_of, load_params, with_calibration_error
+from .params import Bodies, FloatArray, PlantParams, load_params, with_calibration_error
 from .sensors import MOTION_VARIABLES, Sensors
 
 __all__ = ["MOTION_VARIABLES", "DynamicPlant", "StepRecord", "Truth"]
@@ -117,7 +123,7 @@ class DynamicPlant(Sensors):
         self.ipo = ipo
         self.params = params if params is not None else load_params()
         p = self.params
-        bodies = bodies_of(model, p)
+        bodies = p.bodies
         if calibration_seed is not None:
             bodies = with_calibration_error(bodies, p.calibration, calibration_seed)
         #: The physical robot simulated (differs from ``model`` with a calibration error).
@@ -139,7 +145,15 @@ class DynamicPlant(Sensors):
         self.time = 0.0
         self.ticks = 0
         self.steps = 0  # physics steps taken (the rest path takes none)
-        self.torque_limit = np.where(np.isfinite(model.max_torque), model.max_torque, 1e9)
+        #: The motors' torque limits (Nm): the drives saturate there.
+        self.torque_limit = bodies.max_torque.copy()
+        self.drives = Drives(p, bodies, self.h)
+        self._following_limit = np.radians(p.following_error_deg)
+        #: Called with a message when an axis cannot follow (the brakes have closed).
+        self.on_fault: Callable[[str], None] | None = None
+        #: True while the brakes hold the arm after a fault (drives off).
+        self.braked = False
+        self._full_m = np.zeros((6, 6))
         self._payload: Payload | None = None
         self._tool = np.eye(4)
         self._wrench = np.zeros(6)
@@ -151,11 +165,9 @@ class DynamicPlant(Sensors):
         q0_deg = self._axes(store.get("$AXIS_ACT"))
         q0 = np.radians(q0_deg)
         self._build(payload_of(store.get("$LOAD")))
-        self._set_gains(q0)
         self._q_set = q0.copy()
         self._q_set_deg = q0_deg  # at rest the encoders read exactly this (no noise)
         self._qd_ref = np.zeros(6)
-        self._integral = np.zeros(6)
         #: Motor torque (Nm, +KUKA axis): its mean over the last cycle while moving, the exact
         #: static torque at rest (see _simulate for why the mean).
         self.torque = np.zeros(6)
@@ -173,7 +185,7 @@ class DynamicPlant(Sensors):
     def _build(self, payload: Payload | None) -> None:
         """(Re)compile the MuJoCo model for ``payload``, keeping the joint state."""
         old = getattr(self, "_data", None)
-        xml = build_mjcf(self.bodies, self.params, timestep=self.h, payload=payload)
+        xml = build_mjcf(self.bodies, timestep=self.h, payload=payload)
         self._mj = mujoco.MjModel.from_xml_string(xml)
         self._data = mujoco.MjData(self._mj)
         if old is not None:
@@ -202,32 +214,6 @@ class DynamicPlant(Sensors):
         mujoco.mju_mat2Quat(quat, tcp[:3, :3].flatten())
         self._mj.site_pos[self._tcp_site] = tcp[:3, 3] / 1000.0
         self._mj.site_quat[self._tcp_site] = quat
-
-    def _set_gains(self, q: FloatArray) -> None:
-        """Servo gains from the inertia each axis sees at ``q`` (motor + links + payload), so
-        every axis has the same bandwidth; re-tuned when the payload changes, as a KRC uses
-        $LOAD in its controller (a light arm with a heavy load's gains would go unstable)."""
-        p = self.params
-        inertia = self._mass_diagonal(q)
-        self._kd = inertia * p.velocity_bandwidth
-        self._ki = self._kd * p.integral_corner
-        self._kff = inertia if p.acceleration_feedforward else np.zeros(6)
-
-    def _mass_diagonal(self, q: FloatArray) -> FloatArray:
-        """Diagonal of the joint-space inertia M(q) (motor + links), by inverse dynamics:
-        with q̇ = 0, the torque for q̈ = e_j minus the torque for q̈ = 0 is M's column j."""
-        m = self._mj
-        data = mujoco.MjData(m)
-        data.qpos[:] = q
-        mujoco.mj_inverse(m, data)
-        bias = data.qfrc_inverse.copy()
-        diag = np.zeros(6)
-        for j in range(6):
-            data.qacc[:] = 0.0
-            data.qacc[j] = 1.0
-            mujoco.mj_inverse(m, data)
-            diag[j] = data.qfrc_inverse[j] - bias[j]
-        return diag
 
     @property
     def mujoco(self) -> tuple[object, object]:
@@ -285,8 +271,7 @@ class DynamicPlant(Sensors):
         payload = payload_of(load)
         if payload != self._payload:
             try:
-                self._build(payload)
-                self._set_gains(self._q_set)
+                self._build(payload)  # the servo gains follow M(q) with the load, each cycle
             except ValueError as exc:  # MuJoCo refused the model: keep the previous one
                 log.warning(
                     "$LOAD %s cannot be simulated (%s); keeping the previous load", payload, exc
@@ -307,21 +292,16 @@ class DynamicPlant(Sensors):
     def step(self, q_set_deg: FloatArray) -> None:
         """One IPO cycle towards the set-point ``q_set_deg`` (A1..A6, deg)."""
         changed = self._inputs_changed()
-        if self.resting and not changed and q_set_deg is self._q_seen:
-            # the kernel hands over the very same array while it stands still: at rest
-            self.time += self.ipo
-            self.ticks += 1
-            if self._noisy:
-                self._defer()
+        if self.braked or (self.resting and not changed and q_set_deg is self._q_seen):
+            # the brakes hold the arm; or the kernel hands over the very same array while it
+            # stands still: at rest
+            self._idle()
             return
         q_set = np.radians(q_set_deg)
         still = np.array_equal(q_set, self._q_set)
         if self.resting and still and not changed:
             self._q_seen = q_set_deg
-            self.time += self.ipo
-            self.ticks += 1
-            if self._noisy:
-                self._defer()
+            self._idle()
             return
         self._q_seen = None
         self.resting = False
@@ -333,99 +313,125 @@ class DynamicPlant(Sensors):
         self.time += self.ipo
         self.ticks += 1
         d = self._data
+        error = np.abs(q_set - d.qpos)
         if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
             # absurd inputs (a wrench or load of 1e30) blew the state up: a KRC's drives would
             # trip; here the arm is put back on its set-point so the emulator keeps serving
             log.warning("plant state not finite (absurd wrench or load?); reset to the set-point")
+            self.braked = False
             self._settle()
+        elif self.braked:
+            pass  # the monitoring stopped the arm during this cycle
         elif (
             still
             and not np.any(qd_ref)
-            and np.max(np.abs(q_set - d.qpos)) < SETTLE_POS
+            and np.max(error) < SETTLE_POS
             and np.max(np.abs(d.qvel)) < SETTLE_VEL
         ):
             self._settle()
         self.truth = self._truth()
         self._defer()
 
+    def _idle(self) -> None:
+        self.time += self.ipo
+        self.ticks += 1
+        if self._noisy:
+            self._defer()
+
     def _simulate(
         self, q0: FloatArray, q1: FloatArray, qd_ref: FloatArray, qdd_ref: FloatArray
     ) -> None:
-        m, d, n = self._mj, self._data, self.substeps
-        p = self.params
+        m, d, n, h = self._mj, self._data, self.substeps, self.h
         self._obstacles_used = obstacles = self.obstacles
-        ff = self._kff * qdd_ref
-        coulomb, viscous, vs = self.bodies.coulomb, self.bodies.viscous, p.friction_smoothing
-        kd, ki, h, gain = self._kd, self._ki * self.h, self.h, p.position_gain
-        lim = self.torque_limit
+        drives = self.drives
+        drives.schedule(m, d)
         wrench = self._wrench
-        ext_fixed = self._external(-wrench[:3], -wrench[3:]) if np.any(wrench) else None
+        ext_fixed = self._external(-wrench[:3], -wrench[3:]) if np.any(wrench) else np.zeros(6)
         tcp_xpos = d.site_xpos[self._tcp_site]
         contact = np.zeros(3)
-        # the reference at each step's start time, for all steps at once
-        refs = (q0 + (q1 - q0) * (np.arange(n) / n)[:, None]).tolist()
-        # Six axes: numpy's per-call cost is the whole cost of a 6-element step (~18 calls a
-        # step), so the servo runs on Python floats (IEEE doubles too: the same arithmetic in
-        # the same order), ~4x cheaper. Only MuJoCo's state goes in and out as arrays.
-        integral = self._integral.tolist()
-        lims = lim.tolist()
-        qd_r, kp_l, ki_l, kd_l, ff_l = (
-            qd_ref.tolist(),
-            [gain] * 6,
-            ki.tolist(),
-            kd.tolist(),
-            ff.tolist(),
-        )
-        cou, vis, tanh = coulomb.tolist(), viscous.tolist(), math.tanh
-        ext = ext_fixed.tolist() if ext_fixed is not None else None
-        qpos, qvel, qfrc = d.qpos, d.qvel, d.qfrc_applied
-        q_last, qd_last = qpos.copy(), qvel.copy()
-        tau_sum: list[float] = [0.0] * 6
-        tau: list[float] = [0.0] * 6
-        applied: list[float] = [0.0] * 6
+        # the drives' linear fine interpolation: the reference at each step's start
+        refs = q0 + (q1 - q0) * (np.arange(n) / n)[:, None]
+        ref_list = refs.tolist()
+        qd_r, qdd_r = qd_ref.tolist(), qdd_ref.tolist()
+        tau_sum = [0.0] * 6
+        tau = fric = qd = [0.0] * 6
+        q_last = d.qpos.copy()
+        failed = -1
+        ext = ext_fixed
         for k in range(n):
-            ref, qp, qv = refs[k], qpos.tolist(), qvel.tolist()
-            for j in range(6):
-                ev = qd_r[j] + kp_l[j] * (ref[j] - qp[j]) - qv[j]
-                top = lims[j]
-                # anti-windup: the integral never asks for more than the motor can give
-                i = integral[j] + ki_l[j] * ev
-                i = top if i > top else (-top if i < -top else i)
-                integral[j] = i
-                t = kd_l[j] * ev + i + ff_l[j]
-                t = top if t > top else (-top if t < -top else t)
-                tau[j] = t
-                tau_sum[j] += t
-                applied[j] = t - cou[j] * tanh(qv[j] / vs) - vis[j] * qv[j]
-            if ext is not None:
-                applied = [a + b for a, b in zip(applied, ext, strict=True)]
+            ext = ext_fixed
             if obstacles:
                 tcp = tcp_xpos * 1000.0
-                vel = (tcp - self._tcp_prev) / h
-                contact = contact_force(obstacles, tcp, vel)
+                contact = contact_force(obstacles, tcp, (tcp - self._tcp_prev) / h)
                 if np.any(contact):
-                    applied = (np.asarray(applied) + self._external(contact, np.zeros(3))).tolist()
+                    ext = ext + self._external(contact, np.zeros(3))
                 self._tcp_prev = tcp
-            qfrc[:] = applied
-            if k == n - 1:  # the last step's inputs, for the equations-of-motion check
-                q_last, qd_last = qpos.copy(), qvel.copy()
-                self._tcp_prev = tcp_xpos * 1000.0
-            mujoco.mj_step(m, d)
+            if k == n - 1:
+                q_last = d.qpos.copy()
+            tau, fric, qd = drives.step(m, d, ref_list[k], qd_r, qdd_r, ext.tolist())
+            tau_sum = [a + b for a, b in zip(tau_sum, tau, strict=True)]
+            # following-error monitoring, every servo step: the reference at the step's end
+            ref_end = refs[k + 1] if k + 1 < n else q1
+            error = np.abs(ref_end - d.qpos)
+            if np.any(error > self._following_limit) and np.all(np.isfinite(d.qpos)):
+                failed = int(np.argmax(error / self._following_limit))
+                # the brakes close the moment the error reaches the limit: the arm is held
+                # there (an idealisation; a step may have carried it a little further)
+                lim = self._following_limit
+                d.qpos[:] = ref_end + np.clip(d.qpos - ref_end, -lim, lim)
+                break
+        self._tcp_prev = tcp_xpos * 1000.0
+        m.dof_damping[:] = 0.0  # the drives' per-step damping: readers see the rigid model
         # The drive reports the mean motor torque over the IPO cycle, not a sample of its last
         # 2 ms step: the velocity loop corrects the linearly fine-interpolated set-point within
         # the first few ms of each cycle, so the end-of-cycle sample carries almost none of the
         # inertial torque M·q̈ (measured: ~3 % of it on a 20 % PTP) and aliases the servo's
-        # 83 Hz ripple. The mean is what the motion over the cycle needs: with the measured
-        # speeds at both ends, Δq̇/IPO is exactly its mean acceleration.
+        # ripple. The mean is what the motion over the cycle needs: with the measured speeds
+        # at both ends, Δq̇/IPO is exactly its mean acceleration.
         self.torque = np.array(tau_sum) / n
-        self._integral = np.array(integral)
-        tau_a, applied_a = np.array(tau), np.array(applied)
         self.steps += n
-        self.last_step = StepRecord(q_last, qd_last, d.qacc.copy(), tau_a.copy(), applied_a - tau_a)
+        tau_a, qd_a = np.array(tau), np.array(qd)
+        self.last_step = StepRecord(q_last, qd_a, (d.qvel - qd_a) / h, tau_a, ext - np.array(fric))
         self.contact = contact
         mujoco.mj_forward(m, d)  # positions and sites of the final state
         if obstacles:
             self.contact = contact_force(obstacles, tcp_xpos * 1000.0, np.zeros(3))
+        if failed >= 0:
+            self._fault(failed)
+
+    # --- faults ---------------------------------------------------------------------------------
+    def _fault(self, axis: int) -> None:
+        """An axis cannot follow: close the brakes (hold the arm where it is, drives off) and
+        tell the controller."""
+        d = self._data
+        d.qvel[:] = 0.0
+        d.qacc[:] = 0.0
+        mujoco.mj_forward(self._mj, d)
+        self.braked = True
+        self.resting = False
+        self.torque = np.zeros(6)
+        self.drives.integral = np.zeros(6)
+        message = f"Ackn. max. following error exceeded A{axis + 1}"
+        log.warning("plant: %s; brakes closed", message)
+        if self.on_fault is not None:
+            self.on_fault(message)
+
+    @property
+    def position(self) -> FloatArray:
+        """Where the encoders say the axes are, without noise (deg)."""
+        return self._q_set_deg.copy() if self.resting else np.degrees(self._data.qpos)
+
+    def release(self) -> FloatArray:
+        """Open the brakes and switch the drives on where the arm stands (the message was
+        acknowledged); returns that position (deg), the controller's new set-point. The servo
+        starts with the static holding torque, so the arm does not sag."""
+        self.braked = False
+        self._inputs_changed()  # the holding torque under today's load and wrench
+        self._q_set = self._data.qpos.copy()
+        self._q_set_deg = np.degrees(self._q_set)
+        self._settle()
+        self._defer()
+        return self._q_set_deg.copy()
 
     def _external(self, force: FloatArray, torque: FloatArray) -> FloatArray:
         """Generalised force of a wrench on link 6 at the TCP (N, Nm, world axes)."""
@@ -456,9 +462,10 @@ class DynamicPlant(Sensors):
                 static -= self._external(self.contact, np.zeros(3))
         self._tcp_prev = d.site_xpos[self._tcp_site] * 1000.0
         self.torque = np.clip(static, -self.torque_limit, self.torque_limit)
-        self._integral = self.torque.copy()
+        self.drives.integral = self.torque.copy()
         self._qd_ref = np.zeros(6)
-        self.resting = True
+        # a holding torque beyond a motor's limit cannot rest: the physics shows what happens
+        self.resting = bool(np.all(np.abs(static) <= self.torque_limit))
         self.truth = self._truth()
 
     def _truth(self) -> Truth:

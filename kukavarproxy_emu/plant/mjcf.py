@@ -21,7 +21,7 @@ import numpy as np
 
 from pyopenshowvar.krl import Struct
 
-from .params import Bodies, FloatArray, PlantParams, dh_matrix
+from .params import Bodies, FloatArray, dh_matrix
 
 __all__ = ["GRAVITY", "Payload", "build_mjcf", "frame_matrix", "payload_of"]
 
@@ -112,16 +112,15 @@ def _full_inertia(moments: FloatArray, axes: FloatArray) -> str:
 
 def build_mjcf(
     bodies: Bodies,
-    params: PlantParams,
     *,
     timestep: float,
     payload: Payload | None = None,
     tool: FloatArray | None = None,
 ) -> str:
     """The MJCF text of the physical robot (plus ``payload``; site ``tcp`` at ``tool``)."""
-    armature = params.armature
+    armature = bodies.armature
     lines = [
-        '<mujoco model="kr6r900sixx-plant">',
+        '<mujoco model="robot">',
         # balanceinertia: a $LOAD inertia J that no rigid body can have is made physical
         '  <compiler angle="radian" balanceinertia="true"/>',
         f'  <option timestep="{timestep!r}" integrator="Euler" gravity="0 0 {-GRAVITY!r}">',

@@ -1,10 +1,13 @@
 """Parameters of the dynamic plant: the model file, the rigid bodies it describes, calibration error.
 
-:func:`load_params` reads ``kr6r900sixx_dynamics.toml`` (every number there names its source).
-:func:`bodies_of` joins it with the kinematic model (D-H geometry, link masses and centres of
-mass) into :class:`Bodies`, the physical robot the simulation is built from.
-:func:`with_calibration_error` draws a physical robot that differs from the nominal one by the
-model file's ``[calibration]`` amounts, so code using the nominal model meets real mismatch.
+:func:`load_params` reads the plant's own model file (``kr6r900sixx_dynamics.toml``; every
+number there names its source) into :class:`PlantParams`, whose :attr:`~PlantParams.bodies`
+are the physical robot the simulation is built from (geometry, masses, centres of mass,
+inertia, motor inertia, friction, motor torque limits). :func:`make_bodies` builds
+:class:`Bodies` from per-link data given in the base frame at the all-zero pose (the file's
+and URDF's convention), so the controller's nominal model can be built the same way from its
+own numbers. :func:`with_calibration_error` draws a physical robot that differs from the
+nominal one by the file's ``[calibration]`` amounts.
 """
 
 from __future__ import annotations
@@ -12,25 +15,28 @@ from __future__ import annotations
 import tomllib
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-
-from pyopenshowvar.kinematics import RobotModel
 
 __all__ = [
     "DEFAULT_PARAMS_FILE",
     "Bodies",
     "Calibration",
     "PlantParams",
-    "bodies_of",
     "dh_matrix",
     "load_params",
+    "make_bodies",
     "with_calibration_error",
 ]
 
 FloatArray = npt.NDArray[np.float64]
 DEFAULT_PARAMS_FILE = Path(__file__).with_name("kr6r900sixx_dynamics.toml")
+_LINK_KEYS = (
+    "dh", "sign", "origin", "mass", "com", "inertia", "rotor", "gear", "coulomb", "static",
+    "viscous", "max_torque",
+)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -45,72 +51,6 @@ class Calibration:
     friction_fraction: float
 
 
-@dataclass(frozen=True, eq=False)
-class PlantParams:
-    """The model file: per-axis arrays are shape (6,), inertia (6, 3); SI units."""
-
-    inertia: FloatArray
-    rotor: FloatArray
-    gear: FloatArray
-    coulomb: FloatArray
-    viscous: FloatArray
-    friction_smoothing: float
-    position_gain: float
-    velocity_bandwidth: float
-    integral_corner: float
-    acceleration_feedforward: bool
-    substeps: int
-    encoder_noise_deg: float
-    torque_noise_fraction: float
-    calibration: Calibration
-
-    @property
-    def armature(self) -> FloatArray:
-        """Motor inertia reflected to the joint, kg·m²."""
-        return np.asarray(self.rotor * self.gear**2, dtype=np.float64)
-
-
-def load_params(path: str | Path = DEFAULT_PARAMS_FILE) -> PlantParams:
-    """Read a dynamics model file; raises ``ValueError`` for a missing or bad entry."""
-    with open(path, "rb") as fh:
-        data = tomllib.load(fh)
-    try:
-        axes = data["axis"]
-        if len(axes) != 6:
-            raise ValueError(f"{path}: needs 6 [[axis]] tables, found {len(axes)}")
-
-        def col(key: str) -> FloatArray:
-            return np.array([ax[key] for ax in axes], dtype=np.float64)
-
-        servo, noise, cal = data["servo"], data["noise"], data["calibration"]
-        params = PlantParams(
-            inertia=np.array([ax["inertia"] for ax in axes], dtype=np.float64),
-            rotor=col("rotor"),
-            gear=col("gear"),
-            coulomb=col("coulomb"),
-            viscous=col("viscous"),
-            friction_smoothing=float(data["friction"]["smoothing"]),
-            position_gain=float(servo["position_gain"]),
-            velocity_bandwidth=float(servo["velocity_bandwidth"]),
-            integral_corner=float(servo["integral_corner"]),
-            acceleration_feedforward=bool(servo["acceleration_feedforward"]),
-            substeps=int(servo["substeps"]),
-            encoder_noise_deg=float(noise["encoder_deg"]),
-            torque_noise_fraction=float(noise["torque_fraction"]),
-            calibration=Calibration(**{k: float(v) for k, v in cal.items()}),
-        )
-    except (KeyError, TypeError) as exc:
-        raise ValueError(f"{path}: missing or malformed entry {exc}") from None
-    arrays = (params.rotor, params.gear, params.coulomb, params.viscous)
-    if params.inertia.shape != (6, 3) or any(a.shape != (6,) for a in arrays):
-        raise ValueError(f"{path}: inertia needs 3 values and every axis entry one")
-    if np.any(params.inertia <= 0) or np.any(params.gear <= 0) or np.any(params.rotor < 0):
-        raise ValueError(f"{path}: inertia and gear must be > 0, rotor >= 0")
-    if np.any(params.coulomb < 0) or np.any(params.viscous < 0) or params.substeps < 1:
-        raise ValueError(f"{path}: friction must be >= 0 and substeps >= 1")
-    return params
-
-
 def dh_matrix(a: float, alpha: float, d: float, theta: float) -> FloatArray:
     """Standard D-H link transform ``Rz(θ)·Tz(d)·Tx(a)·Rx(α)`` (mm, degrees)."""
     ct, st = np.cos(np.radians(theta)), np.sin(np.radians(theta))
@@ -123,12 +63,14 @@ def dh_matrix(a: float, alpha: float, d: float, theta: float) -> FloatArray:
 
 @dataclass(frozen=True, eq=False)
 class Bodies:
-    """The physical robot.
+    """A robot as rigid bodies.
 
     Standard D-H rows (mm, deg) and KUKA axis signs; ``flange`` the last D-H frame → KUKA
     flange transform; per link: mass (kg), centre of mass ``com`` (mm) and principal inertia
     moments (kg·m²) about the axes ``inertia_axes`` (3×3 columns), both in the link's body
-    frame (the D-H frame carrying its joint axis, see :mod:`.mjcf`); friction per axis.
+    frame (the D-H frame carrying its joint axis, see :mod:`.mjcf`); per axis the armature
+    (motor inertia at the joint, kg·m²), friction (Coulomb and static Nm, viscous Nm·s/rad)
+    and the motor's torque limit (Nm).
     """
 
     a: FloatArray
@@ -141,8 +83,11 @@ class Bodies:
     com: FloatArray
     inertia: FloatArray
     inertia_axes: FloatArray
+    armature: FloatArray
     coulomb: FloatArray
+    static: FloatArray
     viscous: FloatArray
+    max_torque: FloatArray
 
     def joint_frames(self) -> FloatArray:
         """Body frame of each link in the all-zero pose, base frame: ``(6, 4, 4)``, mm.
@@ -157,32 +102,141 @@ class Bodies:
         return frames
 
 
-def bodies_of(model: RobotModel, params: PlantParams) -> Bodies:
-    """The nominal physical robot of ``model`` with the model file's inertia and friction.
+def make_bodies(
+    dh: FloatArray,
+    sign: FloatArray,
+    flange: FloatArray,
+    *,
+    mass: FloatArray,
+    com_base: FloatArray,
+    inertia: FloatArray,
+    armature: FloatArray,
+    max_torque: FloatArray,
+    coulomb: FloatArray | None = None,
+    static: FloatArray | None = None,
+    viscous: FloatArray | None = None,
+) -> Bodies:
+    """:class:`Bodies` from per-link data in the base frame at the all-zero pose.
 
-    The kinematic model gives each centre of mass in the base frame at the all-zero pose and
-    the model file gives inertia along the base axes there; both move into the link frames.
+    ``dh`` rows are ``(a, alpha, d, theta offset)``; ``com_base`` the centres of mass (mm) and
+    ``inertia`` the principal moments along the base axes, both at the all-zero pose; they move
+    into the link body frames here. Friction defaults to none.
     """
+    zeros = np.zeros(6)
     bodies = Bodies(
-        a=model.a.copy(),
-        alpha=model.alpha.copy(),
-        d=model.d.copy(),
-        offset=model.offset.copy(),
-        sign=model.sign.copy(),
-        flange=model.flange.copy(),
-        mass=model.link_mass.copy(),
+        a=np.array(dh[:, 0], dtype=np.float64),
+        alpha=np.array(dh[:, 1], dtype=np.float64),
+        d=np.array(dh[:, 2], dtype=np.float64),
+        offset=np.array(dh[:, 3], dtype=np.float64),
+        sign=np.array(sign, dtype=np.float64),
+        flange=np.array(flange, dtype=np.float64),
+        mass=np.array(mass, dtype=np.float64),
         com=np.zeros((6, 3)),
-        inertia=params.inertia.copy(),
+        inertia=np.array(inertia, dtype=np.float64),
         inertia_axes=np.zeros((6, 3, 3)),
-        coulomb=params.coulomb.copy(),
-        viscous=params.viscous.copy(),
+        armature=np.array(armature, dtype=np.float64),
+        coulomb=zeros.copy() if coulomb is None else np.array(coulomb, dtype=np.float64),
+        static=zeros.copy() if static is None else np.array(static, dtype=np.float64),
+        viscous=zeros.copy() if viscous is None else np.array(viscous, dtype=np.float64),
+        max_torque=np.array(max_torque, dtype=np.float64),
     )
     frames = bodies.joint_frames()
-    com_base = model.link_origin + model.link_com
     rot = frames[:, :3, :3]
-    com = np.einsum("jki,jk->ji", rot, com_base - frames[:, :3, 3])  # Rᵀ (c − o)
+    com = np.einsum("jki,jk->ji", rot, np.asarray(com_base) - frames[:, :3, 3])  # Rᵀ (c − o)
     axes = np.transpose(rot, (0, 2, 1))  # base axes seen from the link frame: Rᵀ
     return replace(bodies, com=com, inertia_axes=axes)
+
+
+@dataclass(frozen=True, eq=False)
+class PlantParams:
+    """The model file: the physical robot (:attr:`bodies`), servo, friction curve, noise,
+    calibration error; SI units."""
+
+    name: str
+    bodies: Bodies
+    friction_smoothing: float
+    stribeck_velocity: float
+    position_gain: float
+    velocity_bandwidth: float
+    integral_corner: float
+    acceleration_feedforward: bool
+    substeps: int
+    following_error_deg: float
+    encoder_noise_deg: float
+    torque_noise_fraction: float
+    calibration: Calibration
+
+    @property
+    def armature(self) -> FloatArray:
+        """Motor inertia reflected to the joint, kg·m² (of the nominal bodies)."""
+        return self.bodies.armature
+
+
+def _frame(xyzabc: list[float]) -> FloatArray:
+    from .mjcf import frame_matrix  # mjcf imports this module
+
+    return frame_matrix(tuple(float(v) for v in xyzabc))
+
+
+def _bodies_of(links: list[dict[str, Any]], flange: list[float], path: object) -> Bodies:
+    if len(links) != 6:
+        raise ValueError(f"{path}: needs 6 [[link]] tables, found {len(links)}")
+    missing = [k for k in _LINK_KEYS if any(k not in link for link in links)]
+    if missing:
+        raise ValueError(f"{path}: every [[link]] needs {', '.join(missing)}")
+
+    def col(key: str, shape: tuple[int, ...] = (6,)) -> FloatArray:
+        arr = np.array([link[key] for link in links], dtype=np.float64)
+        if arr.shape != shape or not np.all(np.isfinite(arr)):
+            raise ValueError(f"{path}: [[link]] {key} needs {shape[1:] or 'one'} finite value(s)")
+        return arr
+
+    mass, rotor, gear = col("mass"), col("rotor"), col("gear")
+    inertia, sign, max_torque = col("inertia", (6, 3)), col("sign"), col("max_torque")
+    coulomb, static, viscous = col("coulomb"), col("static"), col("viscous")
+    if np.any(mass < 0) or np.any(inertia <= 0) or np.any(gear <= 0) or np.any(rotor < 0):
+        raise ValueError(f"{path}: mass and rotor must be >= 0, inertia and gear > 0")
+    if min(coulomb.min(), static.min(), viscous.min()) < 0 or np.any(max_torque <= 0):
+        raise ValueError(f"{path}: friction must be >= 0 and max_torque > 0")
+    if not np.all(np.isin(sign, (-1.0, 1.0))):
+        raise ValueError(f"{path}: sign must be +1 or -1")
+    return make_bodies(
+        col("dh", (6, 4)), sign, _frame(flange),
+        mass=mass, com_base=col("origin", (6, 3)) + col("com", (6, 3)), inertia=inertia,
+        armature=rotor * gear**2, max_torque=max_torque, coulomb=coulomb, static=static,
+        viscous=viscous,
+    )  # fmt: skip
+
+
+def load_params(path: str | Path = DEFAULT_PARAMS_FILE) -> PlantParams:
+    """Read a plant model file; raises ``ValueError`` for a missing or bad entry."""
+    with open(path, "rb") as fh:
+        data = tomllib.load(fh)
+    try:
+        servo, noise, cal = data["servo"], data["noise"], data["calibration"]
+        fric = data["friction"]
+        params = PlantParams(
+            name=str(data.get("name", Path(path).stem)),
+            bodies=_bodies_of(data["link"], data.get("flange", [0.0] * 6), path),
+            friction_smoothing=float(fric["smoothing"]),
+            stribeck_velocity=float(fric["stribeck"]),
+            position_gain=float(servo["position_gain"]),
+            velocity_bandwidth=float(servo["velocity_bandwidth"]),
+            integral_corner=float(servo["integral_corner"]),
+            acceleration_feedforward=bool(servo["acceleration_feedforward"]),
+            substeps=int(servo["substeps"]),
+            following_error_deg=float(servo["following_error_deg"]),
+            encoder_noise_deg=float(noise["encoder_deg"]),
+            torque_noise_fraction=float(noise["torque_fraction"]),
+            calibration=Calibration(**{k: float(v) for k, v in cal.items()}),
+        )
+    except (KeyError, TypeError) as exc:
+        raise ValueError(f"{path}: missing or malformed entry {exc}") from None
+    if params.substeps < 1 or params.friction_smoothing <= 0 or params.stribeck_velocity <= 0:
+        raise ValueError(f"{path}: substeps must be >= 1, friction speeds > 0")
+    if params.following_error_deg <= 0:
+        raise ValueError(f"{path}: following_error_deg must be > 0")
+    return params
 
 
 def with_calibration_error(bodies: Bodies, cal: Calibration, seed: int) -> Bodies:
@@ -197,16 +251,19 @@ def with_calibration_error(bodies: Bodies, cal: Calibration, seed: int) -> Bodie
         factor = 1.0 + np.clip(rng.normal(0.0, frac, shape), -3 * frac, 3 * frac)
         return np.asarray(x * factor, dtype=np.float64)
 
+    a = bodies.a + rng.normal(0.0, cal.length_mm, 6)
+    d = bodies.d + rng.normal(0.0, cal.length_mm, 6)
+    alpha = bodies.alpha + rng.normal(0.0, cal.angle_deg, 6)
+    offset = bodies.offset + rng.normal(0.0, cal.angle_deg, 6)
+    mass = scale(bodies.mass, cal.mass_fraction)
+    com = bodies.com + rng.normal(0.0, cal.com_mm, (6, 3))  # moves with its link
+    # one factor per link: the three moments keep satisfying the triangle inequality
+    inertia = scale(bodies.inertia, cal.inertia_fraction, (6, 1))
+    coulomb = scale(bodies.coulomb, cal.friction_fraction)
+    viscous = scale(bodies.viscous, cal.friction_fraction)
+    # the breakaway friction keeps its ratio to the Coulomb friction (the curve's shape)
+    ratio = np.divide(coulomb, bodies.coulomb, out=np.ones(6), where=bodies.coulomb > 0)
     return replace(
-        bodies,
-        a=bodies.a + rng.normal(0.0, cal.length_mm, 6),
-        d=bodies.d + rng.normal(0.0, cal.length_mm, 6),
-        alpha=bodies.alpha + rng.normal(0.0, cal.angle_deg, 6),
-        offset=bodies.offset + rng.normal(0.0, cal.angle_deg, 6),
-        mass=scale(bodies.mass, cal.mass_fraction),
-        com=bodies.com + rng.normal(0.0, cal.com_mm, (6, 3)),  # moves with its link
-        # one factor per link: the three moments keep satisfying the triangle inequality
-        inertia=scale(bodies.inertia, cal.inertia_fraction, (6, 1)),
-        coulomb=scale(bodies.coulomb, cal.friction_fraction),
-        viscous=scale(bodies.viscous, cal.friction_fraction),
-    )
+        bodies, a=a, d=d, alpha=alpha, offset=offset, mass=mass, com=com, inertia=inertia,
+        coulomb=coulomb, viscous=viscous, static=bodies.static * ratio,
+    )  # fmt: skip

@@ -156,7 +156,12 @@ async def test_no_robot_and_jitter_stats(emulator_factory: Any) -> None:
     still = await emulator_factory(robot=False)
     assert still.robot is None
     emu = await emulator_factory(speed=SPEED)
-    await asyncio.sleep(0.05)
+    # a robot at rest coasts (its late-on-purpose ticks are not counted): poll, with a deadline
+
+    async def counted() -> bool:
+        return bool(emu.robot.jitter().count > 10)
+
+    await wait_for(counted, timeout=5.0)
     stats = emu.robot.jitter()
     assert stats.count > 10 and stats.max >= stats.p99 >= stats.p50 >= 0
 

@@ -101,9 +101,21 @@ def test_fast_lin_near_the_wrist_singularity_slows_down_within_every_axis_limit(
 def test_lin_through_the_wrist_singularity_is_refused_before_it_starts() -> None:
     q0, _start, end = wrist_line(0.0)
     robot = make_robot(q0)
-    with pytest.raises(MotionRefused, match="α5"):
+    with pytest.raises(MotionRefused, match=r"crosses the wrist \(A5 = 0\) singularity"):
         robot.kernel.lin(end)
     assert not robot.kernel.moving
+
+
+def test_a_singularity_message_reads_as_ascii_in_emu_message() -> None:
+    """The refusal text lands in $EMU_MESSAGE[], a CHAR array: it names A5, it never shows a
+    "?" where a Greek letter could not be stored."""
+    q0, _start, end = wrist_line(0.0)
+    robot = make_robot(q0)
+    with pytest.raises(MotionRefused) as refused:
+        robot.kernel.lin(end)
+    robot.fault(str(refused.value))
+    text = robot.store.read("$EMU_MESSAGE[]")
+    assert "A5 = 0" in text and "?" not in text, text
 
 
 def test_lin_planning_is_sliced_so_no_cycle_holds_the_loop() -> None:

@@ -8,14 +8,17 @@ after the app's *nominal* model of everything else is subtracted (thesis eq. 4.5
 * **link inertia** — the links as point masses at their centres of mass (the only mass data a
   kinematic model carries), driven by the *measured* motion: the mean axis acceleration over
   the IPO cycle is the change of the measured axis speed from the cycle's start to its end;
-* **joint terms the kinematic model lacks** — per axis a rotor/rotational inertia I·q̈, Coulomb
-  friction Fc·tanh(q̇/v_s) and viscous friction Fv·q̇, *identified* by :func:`identify` from a
-  short free-space motion, plus a tare offset measured at rest (:func:`tare`), as one zeroes a
-  force sensor before touching anything.
+* **joint terms the kinematic model lacks** — per axis a rotor/rotational inertia I·q̈ and a
+  *friction map*: friction as a piecewise-linear function of the axis speed through fixed
+  knots (:data:`FRICTION_KNOTS`, odd in q̇, a viscous slope beyond the last knot), the
+  look-up table friction compensation of drive practice. Both are *identified* by
+  :func:`identify` from a short free-space motion, plus a tare offset measured at rest
+  (:func:`tare`), as one zeroes a force sensor before touching anything.
 
 None of this is the emulator's code: the simulated robot is a MuJoCo model with link inertia
-tensors, motor inertia and its own friction law (docs/emulator-robot.md); here the app meets it
-as it would meet a real arm. :class:`ForceEstimator` solves Jᵥᵀ F = τ_ext for the 3-D force by
+tensors, motor inertia and its own friction law, a Stribeck curve (docs/emulator-robot.md),
+which the map can approximate but does not contain; here the app meets it as it would meet a
+real arm whose friction law nobody knows. :class:`ForceEstimator` solves Jᵥᵀ F = τ_ext for the 3-D force by
 weighted least squares (weights: the torque noise measured while taring), which stays well
 posed at HOME's wrist singularity where the 6-D Jᵀ is not.
 
@@ -55,8 +58,24 @@ __all__ = [
 FloatArray = npt.NDArray[np.float64]
 #: The KRC4's interpolation cycle (s): the published torque is the mean over one such cycle.
 IPO = 0.012
-#: Candidate smoothing speeds (rad/s) of the Coulomb term; :func:`identify` keeps the best.
-SMOOTHING = (0.005, 0.01, 0.02, 0.05, 0.1)
+#: Axis speeds (rad/s) of the friction map's knots: dense at low speed, where friction
+#: changes fastest (its value at 0 is 0: friction opposes motion).
+FRICTION_KNOTS = (0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2)
+#: Weight of the map's smoothness (first differences between knots, per sample): a knot the
+#: motion hardly reached takes its neighbours' value instead of fitting noise.
+SMOOTHNESS = 0.002
+
+
+def friction_basis(qd: npt.ArrayLike, knots: Sequence[float] = FRICTION_KNOTS) -> FloatArray:
+    """Columns of the friction map at speeds ``qd`` (rad/s): one hat function per knot (the
+    last one held constant beyond it), then the viscous slope beyond the last knot; odd in
+    q̇. Friction = basis @ (values at the knots, slope)."""
+    v = np.abs(np.asarray(qd, dtype=np.float64))
+    grid = np.concatenate([[0.0], knots])
+    unit = np.eye(len(grid))[:, 1:]
+    hats = np.stack([np.interp(v, grid, unit[:, k]) for k in range(len(knots))], axis=-1)
+    tail = np.maximum(v - knots[-1], 0.0)[..., None]
+    return np.asarray(np.sign(np.asarray(qd))[..., None] * np.concatenate([hats, tail], axis=-1))
 
 
 @dataclass(frozen=True)
@@ -134,20 +153,23 @@ class NominalDynamics:
 
 @dataclass(frozen=True)
 class JointTerms:
-    """Per-axis terms identified on the robot: rotor inertia (kg·m²), Coulomb (Nm) and viscous
-    (Nm·s/rad) friction with a smoothing speed (rad/s), tare offset (Nm), torque noise (Nm)."""
+    """Per-axis terms identified on the robot: rotor inertia (kg·m²), the friction map (Nm at
+    each of :data:`FRICTION_KNOTS`, then the viscous slope beyond them in Nm·s/rad: shape
+    ``(6, len(FRICTION_KNOTS) + 1)``), tare offset (Nm), torque noise (Nm)."""
 
     rotor: FloatArray = field(default_factory=lambda: np.zeros(6))
-    coulomb: FloatArray = field(default_factory=lambda: np.zeros(6))
-    viscous: FloatArray = field(default_factory=lambda: np.zeros(6))
-    smoothing: float = 0.02
+    friction: FloatArray = field(default_factory=lambda: np.zeros((6, len(FRICTION_KNOTS) + 1)))
     offset: FloatArray = field(default_factory=lambda: np.zeros(6))
     noise: FloatArray = field(default_factory=lambda: np.ones(6))
+
+    def friction_torque(self, qd: npt.ArrayLike) -> FloatArray:
+        """Friction (Nm, opposing the motion) at axis speeds ``qd`` (rad/s)."""
+        return np.asarray(np.einsum("...jk,jk->...j", friction_basis(qd), self.friction))
 
     def torque(self, motion: CycleMotion, sign: float = 1.0) -> FloatArray:
         qd = np.radians(motion.mean_speed)
         qdd = np.radians(motion.mean_accel)
-        drive = self.rotor * qdd + self.coulomb * np.tanh(qd / self.smoothing) + self.viscous * qd
+        drive = self.rotor * qdd + self.friction_torque(qd)
         return np.asarray(sign * drive + self.offset)
 
 
@@ -172,10 +194,10 @@ def identify(
     *,
     ridge: float = 1e-3,
 ) -> tuple[JointTerms, FloatArray]:
-    """Fit rotor inertia and friction per axis to free-space motion (least squares with a small
-    ridge, so an axis that hardly moved gets ~0 rather than noise); the Coulomb smoothing is the
-    candidate of :data:`SMOOTHING` with the smallest residual. ``base`` brings the tare offset
-    and noise. Returns the terms and the residual RMS per axis (Nm)."""
+    """Fit rotor inertia and the friction map per axis to free-space motion: least squares
+    with a small ridge (an axis that hardly moved gets ~0 rather than noise) and a smoothness
+    penalty between the map's knots (:data:`SMOOTHNESS`). ``base`` brings the tare offset and
+    noise. Returns the terms and the residual RMS per axis (Nm)."""
     if len(motions) < 10:
         raise ValueError(f"identification needs at least 10 cycles of motion, got {len(motions)}")
     sign = dyn.model.torque_sign
@@ -187,26 +209,21 @@ def identify(
     )
     qd = np.radians(np.array([m.mean_speed for m in motions]))
     qdd = np.radians(np.array([m.mean_accel for m in motions]))
-    best: tuple[float, JointTerms, FloatArray] | None = None
-    for vs in SMOOTHING:
-        coef = np.zeros((6, 3))
-        resid = np.zeros(6)
-        for i in range(6):
-            x = np.column_stack([qdd[:, i], np.tanh(qd[:, i] / vs), qd[:, i]])
-            scale = np.maximum(np.sqrt(np.mean(x**2, axis=0)), 1e-12)
-            xs = x / scale
-            lhs = xs.T @ xs + ridge * len(xs) * np.eye(3)
-            c = np.linalg.solve(lhs, xs.T @ y[:, i]) / scale
-            coef[i] = np.maximum(c, 0.0)  # inertia and friction are never negative
-            resid[i] = float(np.sqrt(np.mean((y[:, i] - x @ coef[i]) ** 2)))
-        score = float(np.sum((resid / base.noise) ** 2))
-        if best is None or score < best[0]:
-            terms = replace(
-                base, rotor=coef[:, 0], coulomb=coef[:, 1], viscous=coef[:, 2], smoothing=vs
-            )
-            best = (score, terms, resid)
-    assert best is not None
-    return best[1], best[2]
+    n, knots = len(y), len(FRICTION_KNOTS)
+    # first differences of the map's values (not of the inertia or the viscous slope)
+    diff = np.zeros((knots - 1, knots + 2))
+    diff[:, 1:knots] -= np.eye(knots - 1)
+    diff[:, 2 : knots + 1] += np.eye(knots - 1)
+    smooth = SMOOTHNESS * n * diff.T @ diff
+    rotor, fric, resid = np.zeros(6), np.zeros((6, knots + 1)), np.zeros(6)
+    for i in range(6):
+        x = np.column_stack([qdd[:, i], friction_basis(qd[:, i])])
+        scale = np.maximum(np.sqrt(np.mean(x**2, axis=0)), 1e-12)
+        lhs = x.T @ x + smooth + ridge * n * np.diag(scale**2)
+        c = np.maximum(np.linalg.solve(lhs, x.T @ y[:, i]), 0.0)  # never negative
+        rotor[i], fric[i] = c[0], c[1:]
+        resid[i] = float(np.sqrt(np.mean((y[:, i] - x @ c) ** 2)))
+    return replace(base, rotor=rotor, friction=fric), resid
 
 
 class ForceEstimator:

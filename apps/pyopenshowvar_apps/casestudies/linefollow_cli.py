@@ -13,6 +13,8 @@ from typing import Annotated, Any
 
 import typer
 
+from pyopenshowvar_apps.common import calibration_option
+
 __all__ = ["linefollow"]
 
 
@@ -78,6 +80,7 @@ def linefollow(
     speed: Annotated[
         float, typer.Option(callback=_positive, help="Emulator speed factor with --emulate.")
     ] = 1.0,
+    calibration_error: Annotated[str | None, calibration_option()] = None,
 ) -> None:
     """Follow a line drawn on a table (thesis case study 2): A*, LIN path, $POS_ACT deviation."""
     import asyncio
@@ -93,7 +96,7 @@ def linefollow(
         run_line_following,
     )
     from pyopenshowvar_apps.casestudies.lineimage import generate_line_image
-    from pyopenshowvar_apps.common import Opts, fail_for
+    from pyopenshowvar_apps.common import Opts, calibration_seed, fail_for
 
     def pixel(text: str | None) -> tuple[int, int] | None:
         if text is None:
@@ -116,7 +119,10 @@ def linefollow(
 
         h, w = load_gray(str(image)).shape
         store = parked_store(camera_pose(Table(w, h, scale, pose)))  # type: ignore[arg-type]
-        config = EmulatorConfig(port=0, program="cart_path", speed=speed, latency="kvp")
+        config = EmulatorConfig(
+            port=0, program="cart_path", speed=speed, latency="kvp", plant=Opts.plant,
+            calibration_error=calibration_seed(calibration_error),
+        )  # fmt: skip
         emu = EmulatorThread(config, store=store).start()
         host, port, scale_t = "127.0.0.1", emu.port, speed
         plant = emu.emulator.robot.plant if emu.emulator.robot is not None else None

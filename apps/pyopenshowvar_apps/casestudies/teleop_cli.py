@@ -14,7 +14,7 @@ from typing import Annotated, Any
 
 import typer
 
-from pyopenshowvar_apps.common import EXIT_USAGE, check_seconds, fail
+from pyopenshowvar_apps.common import EXIT_USAGE, calibration_option, check_seconds, fail
 
 __all__ = ["haptic", "teleop"]
 
@@ -23,12 +23,22 @@ __all__ = ["haptic", "teleop"]
 SimFlag = Annotated[bool, typer.Option("--sim", hidden=True, help="Deprecated: use --emulate.")]
 
 
-def _run(program: str, sim: bool, job: Any, obstacles: tuple[Any, ...] = ()) -> Any:
+#: ``--calibration-error`` (with --emulate).
+CalibrationOpt = Annotated[str | None, calibration_option()]
+
+
+def _run(
+    program: str,
+    sim: bool,
+    job: Any,
+    obstacles: tuple[Any, ...] = (),
+    calibration: str | None = None,
+) -> Any:
     from rich.console import Console
 
     from pyopenshowvar import Client, KvpError
     from pyopenshowvar_apps.casestudies.common import summary_table
-    from pyopenshowvar_apps.common import Opts, fail_for
+    from pyopenshowvar_apps.common import Opts, calibration_seed, fail_for
 
     thread = None
     host, port = Opts.host, Opts.port
@@ -37,7 +47,11 @@ def _run(program: str, sim: bool, job: Any, obstacles: tuple[Any, ...] = ()) -> 
     if sim or Opts.emulate:
         from kukavarproxy_emu import EmulatorConfig, EmulatorThread
 
-        config = EmulatorConfig(port=0, program=program, latency="kvp", obstacles=obstacles)
+        config = EmulatorConfig(
+            port=0, program=program, latency="kvp", plant=Opts.plant,
+            obstacles=obstacles if Opts.plant == "dynamic" else (),
+            calibration_error=calibration_seed(calibration),
+        )  # fmt: skip
         thread = EmulatorThread(config)
         thread.start()
         host, port = "127.0.0.1", thread.port
@@ -86,6 +100,7 @@ def teleop(
     ] = "ext_move_axis",
     out: Annotated[Path, typer.Option(help="Output folder.")] = Path("out"),
     sim: SimFlag = False,
+    calibration_error: CalibrationOpt = None,
 ) -> None:
     """Case study 3: teleoperate with a hand device (custom IK + PID → MYAXIS)."""
     from pyopenshowvar_apps.casestudies import devices as dev
@@ -118,6 +133,7 @@ def teleop(
             out_dir=out,
             program=program,  # type: ignore[arg-type]
         ),
+        calibration=calibration_error,
     )
 
 
@@ -126,6 +142,7 @@ def haptic(
     payload: Annotated[float, typer.Option(min=0.0, help="Held payload, kg.")] = 0.0,
     out: Annotated[Path, typer.Option(help="Output folder.")] = Path("out"),
     sim: SimFlag = False,
+    calibration_error: CalibrationOpt = None,
 ) -> None:
     """Case study 4: haptic force feedback through MYPOS / ACTUATOR and $TORQUE_AXIS_ACT
     (with --emulate the robot pushes into a foam block 30 mm ahead)."""
@@ -152,4 +169,4 @@ def haptic(
     # with --emulate, something to touch: a foam block 30 mm in front of HOME's TCP
     x, y, z = forward(KR6R900SIXX, KR6R900SIXX.home)[:3]
     block = Obstacle((x + 130.0, y, z), (100.0, 300.0, 300.0), stiffness=2.0)
-    _run("actuator", sim, job, obstacles=(block,))
+    _run("actuator", sim, job, obstacles=(block,), calibration=calibration_error)
