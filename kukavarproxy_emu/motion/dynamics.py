@@ -103,6 +103,11 @@ class ControllerDynamics:
         if path is None or not np.all(np.isfinite(model.max_torque)):
             log.debug("no dynamic model for %s: accelerations are not adapted", model.name)
             return None
+        try:  # the ideal plant runs without the [emulator] extra; so does its planner
+            import mujoco  # noqa: F401
+        except ImportError:
+            log.warning("mujoco is not installed: accelerations are not adapted to $LOAD")
+            return None
         return cls(model, load_machine_data(path))
 
     def use_load(self, value: object) -> None:
