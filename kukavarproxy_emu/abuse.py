@@ -8,7 +8,9 @@ emulator's promises under attack — bounded memory, no stalls, never a wrong va
 * :func:`run_probe` / ``python -m kukavarproxy_emu.abuse probe`` — the bystander: a well-behaved
   client in its own process (no GIL shared with the abusers) that writes a counter, reads it
   back and reads ``$OV_PRO``, one request at a time, and reports every round trip's latency
-  and every wrong value (:class:`ProbeResult`);
+  and every wrong value (:class:`ProbeResult`); given the emulator's process id (Linux) it
+  also reports each round trip less the time the emulator and the probe waited for a core,
+  which a busy machine does not inflate, and the emulator's CPU time per round trip;
 * the abusers, coroutines that misbehave until cancelled and count what they see in an
   :class:`AbuseTally`: :func:`garbage`, :func:`non_reader`, :func:`long_names`,
   :func:`costly_pipeline`, :func:`mode3_flood`; :data:`RUNAWAY_KRL` is a robot program that
@@ -28,6 +30,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -50,6 +53,7 @@ __all__ = [
     "EmulatorProcess",
     "ProbeResult",
     "costly_pipeline",
+    "cpu_clock",
     "garbage",
     "long_names",
     "mode3_flood",
@@ -178,12 +182,45 @@ class ProbeResult:
     #: Timeouts, lost connections, refused connects.
     errors: int = 0
     notes: list[str] = field(default_factory=list)
+    #: With the emulator's process id (else 0): each round trip less the time the emulator's
+    #: event-loop thread and the probe spent waiting for a core (their run-queue delays,
+    #: Linux schedstats), ms. On an idle machine it is the round trip; on a busy one it
+    #: still shows what the emulator did (or failed to do) before it answered: its own work,
+    #: the others' work it did first, and any time it sat idle with the request unanswered.
+    net_p50_ms: float = 0.0
+    net_p99_ms: float = 0.0
+    net_max_ms: float = 0.0
+    #: The emulator's CPU time (all its threads) per round trip, ms (same condition).
+    cpu_p50_ms: float = 0.0
+    cpu_p99_ms: float = 0.0
+    cpu_max_ms: float = 0.0
 
 
 def _percentile(sorted_ms: Sequence[float], q: float) -> float:
     if not sorted_ms:
         return 0.0
     return sorted_ms[min(len(sorted_ms) - 1, int(len(sorted_ms) * q))]
+
+
+def cpu_clock(pid: int) -> int:
+    """The clock id of process ``pid``'s CPU time, all threads, for :func:`time.clock_gettime`
+    (Linux: the id ``clock_getcpuclockid(3)`` returns, a per-process ``CPUCLOCK_SCHED`` clock
+    with nanosecond resolution; readable for any process of the same user)."""
+    return (~pid << 3) | 2
+
+
+class _RunQueueWait:
+    """Nanoseconds a thread has waited for a core so far: the second field of its Linux
+    ``schedstat`` (``/proc/<pid>/schedstat`` is the process's main thread)."""
+
+    def __init__(self, path: str) -> None:
+        self.fd = os.open(path, os.O_RDONLY)
+
+    def __call__(self) -> int:
+        return int(os.pread(self.fd, 128, 0).split()[1])
+
+    def close(self) -> None:
+        os.close(self.fd)
 
 
 def run_probe(
@@ -194,12 +231,25 @@ def run_probe(
     *,
     period: float = 0.005,
     ready: Callable[[], None] | None = None,
+    emulator_pid: int | None = None,
+    stop: Callable[[], bool] | None = None,
+    min_requests: int = 0,
 ) -> ProbeResult:
-    """Be the bystander for ``seconds``: every ``period`` write ``var`` = n, read it back,
-    read ``$OV_PRO`` (expects 100), each request alone and timed. Blocking sockets; ``ready``
-    is called once connected."""
+    """Be the bystander for ``seconds`` (with ``stop``: until ``stop()`` is true, ``seconds``
+    being then only a cap), and in any case until ``min_requests`` round trips are timed: every
+    ``period`` write ``var`` = n, read it back, read ``$OV_PRO`` (expects 100), each request
+    alone and timed. Blocking sockets; ``ready`` is called once connected. With
+    ``emulator_pid`` (Linux) the net round trips and the emulator's CPU time are measured too
+    (``net_*``, ``cpu_*`` of the result)."""
     result = ProbeResult()
     samples: list[float] = []
+    net_samples: list[float] = []
+    cpu_samples: list[float] = []
+    clock = cpu_clock(emulator_pid) if emulator_pid is not None else None
+    waits = []
+    if emulator_pid is not None:  # the emulator's event loop runs in its main thread
+        waits = [_RunQueueWait(f"/proc/{emulator_pid}/schedstat"),
+                 _RunQueueWait("/proc/thread-self/schedstat")]  # fmt: skip
     sock = socket.create_connection((host, port), timeout=2.0)
     sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
     if ready is not None:
@@ -208,6 +258,9 @@ def run_probe(
     pending: list[Reply] = []
 
     def request(frame: bytes) -> Reply:
+        if clock is not None:
+            waited = sum(wait() for wait in waits)
+            cpu = time.clock_gettime(clock)
         start = time.perf_counter()
         sock.sendall(frame)
         while not pending:
@@ -215,7 +268,11 @@ def run_probe(
             if not data:
                 raise ConnectionError("closed by the emulator")
             pending.extend(decoder.feed_replies(data))
-        samples.append((time.perf_counter() - start) * 1e3)
+        wall = (time.perf_counter() - start) * 1e3
+        samples.append(wall)
+        if clock is not None:
+            cpu_samples.append((time.clock_gettime(clock) - cpu) * 1e3)
+            net_samples.append(wall - (sum(wait() for wait in waits) - waited) / 1e6)
         return pending.pop(0)
 
     def check(reply: Reply, msg_id: int, expect: str, what: str) -> None:
@@ -225,9 +282,15 @@ def run_probe(
                 result.notes.append(f"{what}: id {reply.msg_id} {reply.text[:40]!r}")
 
     end = time.monotonic() + seconds
+
+    def more() -> bool:
+        if len(samples) < min_requests:
+            return True  # a busy machine slows the probe down: it still gets its sample
+        return time.monotonic() < end and (stop is None or not stop())
+
     n = 0
     try:
-        while time.monotonic() < end:
+        while more():
             tick = time.monotonic()
             n += 1
             msg_id = (3 * n) & 0xFFFF
@@ -243,11 +306,21 @@ def run_probe(
         result.notes.append(f"error: {exc}")
     finally:
         sock.close()
+        for wait in waits:
+            wait.close()
     samples.sort()
     result.requests = len(samples)
     result.p50_ms = _percentile(samples, 0.50)
     result.p99_ms = _percentile(samples, 0.99)
     result.max_ms = samples[-1] if samples else 0.0
+    net_samples.sort()
+    result.net_p50_ms = _percentile(net_samples, 0.50)
+    result.net_p99_ms = _percentile(net_samples, 0.99)
+    result.net_max_ms = net_samples[-1] if net_samples else 0.0
+    cpu_samples.sort()
+    result.cpu_p50_ms = _percentile(cpu_samples, 0.50)
+    result.cpu_p99_ms = _percentile(cpu_samples, 0.99)
+    result.cpu_max_ms = cpu_samples[-1] if cpu_samples else 0.0
     return result
 
 
@@ -258,18 +331,37 @@ class Probe:
         self.proc = proc
 
     def result(self, timeout: float = 120.0) -> ProbeResult:
-        out, _ = self.proc.communicate(timeout=timeout)
+        """Wait for the probe to end (a probe started ``until_stopped`` is stopped first)."""
+        out, _ = self.proc.communicate(timeout=timeout)  # closes its stdin: stop
         lines = [line for line in out.splitlines() if line.startswith("{")]
         if not lines:
             return ProbeResult(errors=1, notes=[f"probe failed: {out[-500:]!r}"])
         return ProbeResult(**json.loads(lines[-1]))
 
 
-def start_probe(host: str, port: int, seconds: float, var: str) -> Probe:
-    """Start the bystander process; returns once it is connected and about to start."""
+def start_probe(
+    host: str,
+    port: int,
+    seconds: float,
+    var: str,
+    *,
+    emulator_pid: int | None = None,
+    until_stopped: bool = False,
+    min_requests: int = 0,
+) -> Probe:
+    """Start the bystander process; returns once it is connected and about to start. With
+    ``emulator_pid`` it reports net round trips and emulator CPU time too (see
+    :class:`ProbeResult`); ``until_stopped``: it runs until :meth:`Probe.result` (``seconds``
+    is then only a cap); it times at least ``min_requests`` round trips in any case."""
+    extra = ["--min-requests", str(min_requests)]
+    if emulator_pid is not None:
+        extra += ["--emulator-pid", str(emulator_pid)]
+    if until_stopped:
+        extra.append("--until-eof")
     proc = subprocess.Popen(
         [sys.executable, "-m", "kukavarproxy_emu.abuse", "probe", host, str(port),
-         str(seconds), var],
+         str(seconds), var, *extra],
+        stdin=subprocess.PIPE if until_stopped else subprocess.DEVNULL,
         stdout=subprocess.PIPE,
         text=True,
         env={**os.environ, "PYTHONUNBUFFERED": "1"},
@@ -463,9 +555,31 @@ def main(argv: Sequence[str] | None = None) -> int:
     probe.add_argument("port", type=int)
     probe.add_argument("seconds", type=float)
     probe.add_argument("var", help="an INT variable the probe may write")
+    probe.add_argument(
+        "--emulator-pid", type=int, help="measure this process's CPU time per round trip"
+    )
+    probe.add_argument(
+        "--until-eof", action="store_true", help="run until stdin closes (SECONDS: a cap)"
+    )
+    probe.add_argument("--min-requests", type=int, default=0, help="time at least this many")
     args = parser.parse_args(argv)
+    stop = threading.Event()
+
+    def wait_for_eof() -> None:
+        sys.stdin.read()
+        stop.set()
+
+    if args.until_eof:
+        threading.Thread(target=wait_for_eof, daemon=True).start()
     result = run_probe(
-        args.host, args.port, args.seconds, args.var, ready=lambda: print("ready", flush=True)
+        args.host,
+        args.port,
+        args.seconds,
+        args.var,
+        ready=lambda: print("ready", flush=True),
+        emulator_pid=args.emulator_pid,
+        stop=stop.is_set if args.until_eof else None,
+        min_requests=args.min_requests,
     )
     print(json.dumps(asdict(result)), flush=True)
     return 0

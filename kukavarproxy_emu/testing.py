@@ -14,12 +14,17 @@ latency and no discovery, and close the emulator after the test:
 
 :class:`RawClient` is a deliberately dumb asyncio client speaking raw frames (no ids, no
 retries), for tests that need to see exactly the bytes the emulator sends.
+
+:func:`wait_until` / :func:`wait_until_sync` poll a condition with a deadline: what a test
+waits on instead of a fixed sleep, so it holds on a loaded machine and is quick on an idle one.
 """
 
 from __future__ import annotations
 
 import asyncio
-from collections.abc import AsyncIterator, Awaitable, Iterator
+import inspect
+import time
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
 from dataclasses import replace
 from types import TracebackType
 from typing import Any, Protocol, Self
@@ -45,12 +50,55 @@ __all__ = [
     "fast_robot",
     "ideal_emulator",
     "ideal_emulator_thread",
+    "wait_until",
+    "wait_until_sync",
 ]
 
 #: The configuration every fixture starts from.
 TEST_CONFIG = EmulatorConfig(port=0, latency="none", discovery=False)
 #: The same with the ideal plant (exact values).
 IDEAL_CONFIG = replace(TEST_CONFIG, plant="ideal")
+
+
+async def wait_until(
+    predicate: Callable[[], object],
+    timeout: float = 10.0,
+    *,
+    interval: float = 0.005,
+    what: str = "",
+) -> None:
+    """Poll ``predicate()`` (its result may be awaitable) every ``interval`` seconds until it
+    is true; AssertionError naming ``what`` if it is not within ``timeout`` seconds.
+
+    The deadline is generous on purpose: on an idle machine the wait ends as soon as the
+    condition holds, and a loaded one may take many times longer without failing the test.
+    """
+    loop = asyncio.get_running_loop()
+    end = loop.time() + timeout
+    while True:
+        value = predicate()
+        if inspect.isawaitable(value):
+            value = await value
+        if value:
+            return
+        if loop.time() > end:
+            raise AssertionError(f"not true within {timeout} s: {what or predicate}")
+        await asyncio.sleep(interval)
+
+
+def wait_until_sync(
+    predicate: Callable[[], object],
+    timeout: float = 10.0,
+    *,
+    interval: float = 0.005,
+    what: str = "",
+) -> None:
+    """:func:`wait_until` for synchronous code (CLI tests, threads): sleeps between polls."""
+    end = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > end:
+            raise AssertionError(f"not true within {timeout} s: {what or predicate}")
+        time.sleep(interval)
 
 
 class RawClient:

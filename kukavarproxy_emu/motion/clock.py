@@ -284,6 +284,23 @@ class IpoClock:
     def running(self) -> bool:
         return self._running
 
+    @property
+    def deadline(self) -> float:
+        """Loop time (``loop.time()``) at which the next tick is due (``inf`` when stopped
+        before it started); while coasting, the first of the ticks slept through."""
+        return self._deadline
+
+    @property
+    def coasting(self) -> int:
+        """Ticks the clock is sleeping through right now (0: it wakes for the next tick)."""
+        return self._coasting
+
+    @property
+    def wakeups(self) -> int:
+        """Timer wake-ups so far of the event loop's shared clock timer (all the clocks of
+        this loop; 0 before :meth:`start`): what coasting saves."""
+        return self._wheel.fires if self._wheel is not None else 0
+
     def start(self) -> None:
         """Start ticking (on the running event loop); the first tick is one period away."""
         if self._running:

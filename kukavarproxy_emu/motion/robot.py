@@ -122,6 +122,11 @@ class Robot:
     async def stop(self) -> None:
         await self.clock.stop()
 
+    def begin(self) -> None:
+        """Select and start the program without starting the clock: for a robot driven by
+        hand, one :meth:`tick` at a time (a twin of a running robot, an offline run)."""
+        self._begin()
+
     def _begin(self) -> None:
         self._set("$PRO_NAME1[]", self.program.krl_name)
         self._set("$DRIVES_ON", True)
