@@ -1,0 +1,244 @@
+"""Hostile Modbus masters against the wave-platform simulator: the abuse suite's and bench's tools.
+
+``tests/abuse/test_abuse_platform.py`` and ``bench/app_abuse.py`` attack ``kvp platform`` with:
+
+* :class:`PlatformProcess` — ``kvp platform --port 0`` in a subprocess (its memory is its own);
+* :func:`silent_master` — a master switches the drives and the PLC's own waves on, then
+  disconnects without a word; a reader (reads never feed the watchdog) times how long the
+  platform keeps moving;
+* :func:`write_refusal` — one write of a register or coil by any client: the Modbus exception
+  code it got (0: accepted);
+* the abusers, coroutines that misbehave until cancelled and count what they see in an
+  :class:`~pyopenshowvar_apps.web.abuse.AttackTally`: :func:`garbage` (random frames and
+  broken MBAP headers), :func:`flood` (pipelined reads, never waiting) and :func:`idle`
+  (connections that say nothing);
+* :func:`probe` — the bystander: a master reading the state block, one request at a time.
+
+Nothing here asserts: the suite and the bench decide what is acceptable. Every wait is bounded.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import random
+import signal
+import struct
+import subprocess
+import sys
+import time
+from pathlib import Path
+from types import TracebackType
+from typing import Self
+
+from ..web.abuse import AttackTally
+from . import registers as reg
+
+__all__ = [
+    "PlatformProcess",
+    "flood",
+    "garbage",
+    "idle",
+    "probe",
+    "silent_master",
+    "write_refusal",
+]
+
+
+class PlatformProcess:
+    """``kvp platform --port 0 ARGS...`` in a subprocess; ``with`` stops it (SIGINT)."""
+
+    def __init__(self, *args: str) -> None:
+        self.args = list(args)
+        self.proc: subprocess.Popen[str] | None = None
+        self.host, self.port = "127.0.0.1", 0
+
+    def __enter__(self) -> Self:
+        kvp = str(Path(sys.executable).with_name("kvp"))
+        self.proc = subprocess.Popen(
+            [kvp, "platform", "--port", "0", *self.args],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        )
+        assert self.proc.stdout is not None
+        line = self.proc.stdout.readline().strip()
+        if not line.startswith("platform PLC on modbus://"):
+            self.proc.kill()
+            raise RuntimeError(f"kvp platform did not start: {line!r}")
+        host, _, port = line.removeprefix("platform PLC on modbus://").rpartition(":")
+        self.host, self.port = host, int(port)
+        return self
+
+    @property
+    def pid(self) -> int:
+        assert self.proc is not None
+        return self.proc.pid
+
+    def alive(self) -> bool:
+        return self.proc is not None and self.proc.poll() is None
+
+    def stop(self) -> tuple[int | None, str]:
+        """SIGINT and wait: (exit status or None if it had to be killed, its stderr)."""
+        if self.proc is None:
+            return None, ""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+        try:
+            _, err = self.proc.communicate(timeout=10)
+            return self.proc.returncode, err
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            _, err = self.proc.communicate(timeout=5)
+            return None, err
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.stop()
+
+
+async def _client(host: str, port: int) -> object:
+    from pymodbus.client import AsyncModbusTcpClient
+
+    client = AsyncModbusTcpClient(host, port=port, timeout=1.0, retries=0, reconnect_delay=0)
+    if not await client.connect():
+        client.close()
+        raise ConnectionError(f"platform {host}:{port}: cannot connect")
+    return client
+
+
+async def silent_master(host: str, port: int, watch: float, *, run: float = 1.5) -> float:
+    """Drives and the PLC's waves on, ``run`` seconds of waves, then the master disconnects.
+    Returns the seconds the platform kept moving after that (``watch`` if it still moved)."""
+    from .master import PlatformClient
+
+    async with PlatformClient(host, port) as master:
+        await master.configure(watchdog=1.0)
+        await master.enable(True)
+        await master.wave(True)
+        await asyncio.sleep(run)
+    gone = time.monotonic()
+    async with PlatformClient(host, port) as reader:  # reads only: they never feed the watchdog
+        last = 0.0
+        while (now := time.monotonic()) - gone < watch:
+            state = await reader.read_state()
+            if state.flag("moving"):
+                last = now - gone
+            await asyncio.sleep(0.02)
+    return last
+
+
+async def write_refusal(host: str, port: int, kind: str, address: int, value: int) -> int:
+    """One write (``kind`` "register" or "coil") by a fresh client: its exception code, or 0."""
+    client = await _client(host, port)
+    try:
+        if kind == "coil":
+            response = await client.write_coil(address, bool(value), device_id=1)  # type: ignore[attr-defined]
+        else:
+            response = await client.write_register(address, value, device_id=1)  # type: ignore[attr-defined]
+        return int(getattr(response, "exception_code", 0)) if response.isError() else 0
+    finally:
+        client.close()  # type: ignore[attr-defined]
+
+
+def _frame(tid: int, pdu: bytes) -> bytes:
+    return struct.pack(">HHHB", tid & 0xFFFF, 0, len(pdu) + 1, 1) + pdu
+
+
+async def garbage(host: str, port: int, tally: AttackTally, *, seed: int = 0) -> None:
+    """Connect, send one broken frame, wait briefly for an answer or the close; again."""
+    rng = random.Random(seed)
+    while True:
+        try:
+            reader, writer = await asyncio.open_connection(host, port)
+        except OSError:
+            tally.errors += 1
+            await asyncio.sleep(0.01)
+            continue
+        tally.connections += 1
+        kind = rng.randrange(5)
+        if kind == 0:
+            data = rng.randbytes(rng.randint(1, 600))
+        elif kind == 1:  # an MBAP header announcing 65535 bytes that never come
+            data = struct.pack(">HHHB", 1, 0, 0xFFFF, 1) + rng.randbytes(100)
+        elif kind == 2:  # a read of 2000 registers at the end of the address space
+            data = _frame(2, struct.pack(">BHH", 3, 0xFFF0, 2000))
+        elif kind == 3:  # unknown function codes
+            data = _frame(3, bytes([rng.randrange(0x40, 0x80)]) + rng.randbytes(4))
+        else:  # a write of undefined coils, all of them
+            data = _frame(4, struct.pack(">BHHB", 15, 0, 2000, 250) + bytes(250))
+        writer.write(data)
+        tally.bytes_sent += len(data)
+        try:
+            async with asyncio.timeout(0.2):
+                while await reader.read(4096):
+                    pass
+            tally.closed_by_server += 1
+        except (TimeoutError, OSError):
+            pass
+        finally:
+            writer.close()
+
+
+async def flood(host: str, port: int, tally: AttackTally, *, depth: int = 64) -> None:
+    """Pipelined reads of the whole state block, ``depth`` at a time, answers read lazily."""
+    reader, writer = await asyncio.open_connection(host, port)
+    tally.connections += 1
+    request = b"".join(_frame(i, struct.pack(">BHH", 4, 0, reg.INPUT_COUNT)) for i in range(depth))
+    try:
+        while True:
+            writer.write(request)
+            tally.bytes_sent += len(request)
+            await writer.drain()
+            try:
+                async with asyncio.timeout(2.0):
+                    got = 0
+                    while got < depth * (9 + 2 * reg.INPUT_COUNT):
+                        data = await reader.read(65536)
+                        if not data:
+                            tally.closed_by_server += 1
+                            return
+                        got += len(data)
+            except TimeoutError:
+                tally.errors += 1
+    finally:
+        writer.close()
+
+
+async def idle(host: str, port: int, tally: AttackTally, *, sockets: int = 50) -> None:
+    """Hold ``sockets`` connections that never send anything, until cancelled."""
+    writers = []
+    try:
+        for _ in range(sockets):
+            try:
+                _, writer = await asyncio.open_connection(host, port)
+            except OSError:
+                tally.errors += 1
+                continue
+            tally.connections += 1
+            writers.append(writer)
+        await asyncio.Event().wait()
+    finally:
+        for writer in writers:
+            writer.close()
+
+
+async def probe(host: str, port: int, seconds: float) -> list[float]:
+    """The bystander: read the state block one request at a time for ``seconds``; each
+    round trip in ms (a failed read raises: the suite counts it)."""
+    from .master import PlatformClient
+
+    out: list[float] = []
+    async with PlatformClient(host, port, timeout=2.0) as master:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            t0 = time.perf_counter()
+            await master.read_state()
+            out.append((time.perf_counter() - t0) * 1e3)
+            await asyncio.sleep(0.005)
+    return out
