@@ -113,16 +113,21 @@ async def _client(host: str, port: int) -> object:
 
 
 async def silent_master(host: str, port: int, watch: float, *, run: float = 1.5) -> float:
-    """Drives and the PLC's waves on, ``run`` seconds of waves, then the master disconnects.
-    Returns the seconds the platform kept moving after that (``watch`` if it still moved)."""
+    """Drives and the PLC's waves on, ``run`` seconds of waves with a heartbeat every 0.1 s,
+    then the master disconnects. Returns the seconds the platform kept moving after its last
+    write (``watch`` when it still moved at the end)."""
     from .master import PlatformClient
 
     async with PlatformClient(host, port) as master:
         await master.configure(watchdog=1.0)
         await master.enable(True)
         await master.wave(True)
-        await asyncio.sleep(run)
-    gone = time.monotonic()
+        end = time.monotonic() + run
+        while time.monotonic() < end:  # a live master: its heartbeat feeds the watchdog
+            await master.heartbeat()
+            await asyncio.sleep(0.1)
+        await master.heartbeat()
+    gone = time.monotonic()  # the master's last write, and its disconnect
     async with PlatformClient(host, port) as reader:  # reads only: they never feed the watchdog
         last = 0.0
         while (now := time.monotonic()) - gone < watch:
