@@ -21,21 +21,19 @@ platform, each in its own process. Then:
 from __future__ import annotations
 
 import asyncio
-import signal
-import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _common import ROOT, EmuProcess, Row, base_parser, machine_info, print_rows, write_json
+from _common import EmuProcess, Row, base_parser, machine_info, print_rows, write_json
 from pyopenshowvar_apps.heave.abuse import PlatformProcess, silent_master, write_refusal
 from pyopenshowvar_apps.web.abuse import (
     CRAFTED,
     AttackTally,
+    WebProcess,
     axis_motion,
     closing_pages,
     crafted,
@@ -51,36 +49,6 @@ from pyopenshowvar import Client
 KVP = str(Path(sys.executable).with_name("kvp"))
 
 
-class WebProcess:
-    """``kvp --port PORT web --http-port 0`` with its stderr in a file (tracebacks counted)."""
-
-    def __init__(self, kvp_port: int) -> None:
-        self.err = tempfile.TemporaryFile(mode="w+")
-        self.proc = subprocess.Popen(
-            [KVP, "--port", str(kvp_port), "web", "--http-port", "0"],
-            stdout=subprocess.PIPE, stderr=self.err, text=True, cwd=ROOT,
-        )  # fmt: skip
-        assert self.proc.stdout is not None
-        line = self.proc.stdout.readline().strip()
-        if not line.startswith("serving on http://"):
-            self.proc.kill()
-            raise RuntimeError(f"kvp web did not start: {line!r}")
-        self.port = int(line.removeprefix("serving on ").rstrip("/").rpartition(":")[2])
-        self.ws_url = f"ws://127.0.0.1:{self.port}/ws"
-
-    def tracebacks(self) -> int:
-        self.err.seek(0)
-        return self.err.read().count("Traceback")
-
-    def close(self) -> None:
-        self.proc.send_signal(signal.SIGINT)
-        try:
-            self.proc.wait(10)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-        self.err.close()
-
-
 async def ready(kvp: Client) -> None:
     async with asyncio.timeout(20):
         while await kvp.read("$PRO_STATE1") != "#P_ACTIVE":  # noqa: ASYNC110 - polling KVP
@@ -91,29 +59,25 @@ async def ready(kvp: Client) -> None:
 async def web_attacks(quick: bool) -> list[Row]:
     rows: list[Row] = []
     args = ["--program", str(KRL_DIR / "kvp_jog.src"), "--config", str(KRL_DIR / "kvp_jog_config.dat")]  # fmt: skip
-    with EmuProcess(*args) as emu:
-        web = WebProcess(emu.port)
-        try:
-            async with Client("127.0.0.1", emu.port, timeout=5.0) as kvp:
-                await ready(kvp)
-                answers = await rogue_page(web.ws_url)
-                watch = 1.0 if quick else 3.0
-                motion = await axis_motion("127.0.0.1", emu.port, watch)
-                refused = sum(1 for a in answers if a.get("error") or a.get("t") != "result")
-                rows.append(Row("rogue page: A1 travel after the page closed", float(motion.travel[0]),
+    with EmuProcess(*args) as emu, WebProcess(emu.port) as web:
+        async with Client("127.0.0.1", emu.port, timeout=5.0) as kvp:
+            await ready(kvp)
+            answers = await rogue_page(web.ws_url)
+            watch = 1.0 if quick else 3.0
+            motion = await axis_motion("127.0.0.1", emu.port, watch)
+            refused = sum(1 for a in answers if a.get("error") or a.get("t") != "result")
+            rows.append(Row("rogue page: A1 travel after the page closed", float(motion.travel[0]),
                                 "deg", target=("ours", "<=", 0.01),
                                 note=f"{refused}/{len(answers)} writes refused; watched {watch:g} s"))  # fmt: skip
-                rows.append(Row("rogue page: A1 peak speed / the A1 jog speed",
+            rows.append(Row("rogue page: A1 peak speed / the A1 jog speed",
                                 float(motion.peak_speed[0]) / AXIS_SPEED[0], "x",
                                 target=("ours", "<=", 1.0)))  # fmt: skip
-                rows.append(Row("rogue page: A1 still moving at the end of the watch",
+            rows.append(Row("rogue page: A1 still moving at the end of the watch",
                                 float(motion.last_motion > watch - 0.2), "",
                                 target=("ours", "<=", 0.0)))  # fmt: skip
-                await kvp.write_many([("JOG_AX", "{A1 0}"), ("JOG_UNTIL", "0"), ("JOG_MODE", "0")])
-            rows += await slow_rows(web, quick)
-            rows += await crafted_rows(web)
-        finally:
-            web.close()
+            await kvp.write_many([("JOG_AX", "{A1 0}"), ("JOG_UNTIL", "0"), ("JOG_MODE", "0")])
+        rows += await slow_rows(web, quick)
+        rows += await crafted_rows(web)
     return rows
 
 

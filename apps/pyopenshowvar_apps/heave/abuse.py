@@ -2,17 +2,18 @@
 
 ``tests/abuse/test_abuse_platform.py`` and ``bench/app_abuse.py`` attack ``kvp platform`` with:
 
-* :class:`PlatformProcess` — ``kvp platform --port 0`` in a subprocess (its memory is its own);
+* :class:`PlatformProcess` — ``kvp platform --port 0`` in its own process (its memory is its own);
 * :func:`silent_master` — a master switches the drives and the PLC's own waves on, then
   disconnects without a word; a reader (reads never feed the watchdog) times how long the
   platform keeps moving;
 * :func:`write_refusal` — one write of a register or coil by any client: the Modbus exception
   code it got (0: accepted);
 * the abusers, coroutines that misbehave until cancelled and count what they see in an
-  :class:`~pyopenshowvar_apps.web.abuse.AttackTally`: :func:`garbage` (random frames and
-  broken MBAP headers), :func:`flood` (pipelined reads, never waiting) and :func:`idle`
+  :class:`~pyopenshowvar_apps.abusekit.AttackTally`: :func:`garbage` (random frames and
+  broken MBAP headers), :func:`flood` (reads back to back, as fast as answered) and :func:`idle`
   (connections that say nothing);
-* :func:`probe` — the bystander: a master reading the state block, one request at a time.
+* :func:`probe` — the bystander: a master reading the state block, one request at a time
+  (:class:`ProbeProcess`: the same in a process of its own).
 
 Nothing here asserts: the suite and the bench decide what is acceptable. Every wait is bounded.
 """
@@ -20,22 +21,19 @@ Nothing here asserts: the suite and the bench decide what is acceptable. Every w
 from __future__ import annotations
 
 import asyncio
-import os
+import json
 import random
-import signal
 import struct
-import subprocess
 import sys
 import time
-from pathlib import Path
-from types import TracebackType
-from typing import Self
+from collections.abc import Callable
 
-from ..web.abuse import AttackTally
+from ..abusekit import AppProcess, AttackTally
 from . import registers as reg
 
 __all__ = [
     "PlatformProcess",
+    "ProbeProcess",
     "flood",
     "garbage",
     "idle",
@@ -45,61 +43,19 @@ __all__ = [
 ]
 
 
-class PlatformProcess:
-    """``kvp platform --port 0 ARGS...`` in a subprocess; ``with`` stops it (SIGINT)."""
+class PlatformProcess(AppProcess):
+    """``kvp platform --port 0 ARGS...`` in its own process."""
 
     def __init__(self, *args: str) -> None:
-        self.args = list(args)
-        self.proc: subprocess.Popen[str] | None = None
-        self.host, self.port = "127.0.0.1", 0
-
-    def __enter__(self) -> Self:
-        kvp = str(Path(sys.executable).with_name("kvp"))
-        self.proc = subprocess.Popen(
-            [kvp, "platform", "--port", "0", *self.args],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-            env={**os.environ, "PYTHONUNBUFFERED": "1"},
-        )
-        assert self.proc.stdout is not None
-        line = self.proc.stdout.readline().strip()
-        if not line.startswith("platform PLC on modbus://"):
-            self.proc.kill()
-            raise RuntimeError(f"kvp platform did not start: {line!r}")
-        host, _, port = line.removeprefix("platform PLC on modbus://").rpartition(":")
-        self.host, self.port = host, int(port)
-        return self
+        super().__init__("platform", "--port", "0", *args, expect="platform PLC on modbus://")
 
     @property
-    def pid(self) -> int:
-        assert self.proc is not None
-        return self.proc.pid
+    def host(self) -> str:
+        return self.first.removeprefix("platform PLC on modbus://").rpartition(":")[0]
 
-    def alive(self) -> bool:
-        return self.proc is not None and self.proc.poll() is None
-
-    def stop(self) -> tuple[int | None, str]:
-        """SIGINT and wait: (exit status or None if it had to be killed, its stderr)."""
-        if self.proc is None:
-            return None, ""
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-        try:
-            _, err = self.proc.communicate(timeout=10)
-            return self.proc.returncode, err
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            _, err = self.proc.communicate(timeout=5)
-            return None, err
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.stop()
+    @property
+    def port(self) -> int:
+        return int(self.first.rpartition(":")[2])
 
 
 async def _client(host: str, port: int) -> object:
@@ -161,8 +117,8 @@ async def garbage(host: str, port: int, tally: AttackTally, *, seed: int = 0) ->
     while True:
         try:
             reader, writer = await asyncio.open_connection(host, port)
-        except OSError:
-            tally.errors += 1
+        except OSError as exc:
+            tally.error(f"connect: {exc}")
             await asyncio.sleep(0.01)
             continue
         tally.connections += 1
@@ -190,27 +146,31 @@ async def garbage(host: str, port: int, tally: AttackTally, *, seed: int = 0) ->
             writer.close()
 
 
-async def flood(host: str, port: int, tally: AttackTally, *, depth: int = 64) -> None:
-    """Pipelined reads of the whole state block, ``depth`` at a time, answers read lazily."""
+async def flood(host: str, port: int, tally: AttackTally) -> None:
+    """Reads of the whole state block back to back, as fast as the answers come. (One at a time:
+    pymodbus' server takes one frame per received segment and keeps the rest until the next
+    one arrives, so a pipelining master stalls itself; that is not the attack measured here.)"""
     reader, writer = await asyncio.open_connection(host, port)
     tally.connections += 1
-    request = b"".join(_frame(i, struct.pack(">BHH", 4, 0, reg.INPUT_COUNT)) for i in range(depth))
+    answer = 9 + 2 * reg.INPUT_COUNT
+    n = 0
     try:
         while True:
+            n += 1
+            request = _frame(n, struct.pack(">BHH", 4, 0, reg.INPUT_COUNT))
             writer.write(request)
             tally.bytes_sent += len(request)
-            await writer.drain()
+            tally.sent += 1
             try:
                 async with asyncio.timeout(2.0):
-                    got = 0
-                    while got < depth * (9 + 2 * reg.INPUT_COUNT):
-                        data = await reader.read(65536)
-                        if not data:
-                            tally.closed_by_server += 1
-                            return
-                        got += len(data)
+                    data = await reader.readexactly(answer)
             except TimeoutError:
-                tally.errors += 1
+                tally.error("no answer to a read within 2 s")
+                continue
+            except asyncio.IncompleteReadError:
+                tally.closed_by_server += 1
+                return
+            tally.answers += int(data[:2] == request[:2])
     finally:
         writer.close()
 
@@ -222,8 +182,8 @@ async def idle(host: str, port: int, tally: AttackTally, *, sockets: int = 50) -
         for _ in range(sockets):
             try:
                 _, writer = await asyncio.open_connection(host, port)
-            except OSError:
-                tally.errors += 1
+            except OSError as exc:
+                tally.error(f"connect: {exc}")
                 continue
             tally.connections += 1
             writers.append(writer)
@@ -233,17 +193,59 @@ async def idle(host: str, port: int, tally: AttackTally, *, sockets: int = 50) -
             writer.close()
 
 
-async def probe(host: str, port: int, seconds: float) -> list[float]:
-    """The bystander: read the state block one request at a time for ``seconds``; each
-    round trip in ms (a failed read raises: the suite counts it)."""
+async def probe(
+    host: str, port: int, seconds: float, *, ready: Callable[[], None] | None = None
+) -> list[tuple[float, float]]:
+    """The bystander: read the state block one request at a time for ``seconds`` (``ready``
+    is called once connected); each read as (``time.monotonic()`` when it started, round trip
+    in ms). A failed read raises."""
     from .master import PlatformClient
 
-    out: list[float] = []
+    out: list[tuple[float, float]] = []
     async with PlatformClient(host, port, timeout=2.0) as master:
+        await master.read_state()
+        if ready is not None:
+            ready()
         end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            t0 = time.perf_counter()
+        while (t0 := time.monotonic()) < end:
+            start = time.perf_counter()
             await master.read_state()
-            out.append((time.perf_counter() - t0) * 1e3)
+            out.append((t0, (time.perf_counter() - start) * 1e3))
             await asyncio.sleep(0.005)
     return out
+
+
+class ProbeProcess:
+    """:func:`probe` in a process of its own, so the attackers' event loop does not slow the
+    bystander down: ``start()``, then ``await result()`` (monotonic clocks agree across
+    processes on one machine, so the samples can be split by when the attack ran)."""
+
+    def __init__(self, host: str, port: int, seconds: float) -> None:
+        self.args = (host, str(port), str(seconds))
+        self.seconds = seconds
+        self.proc: asyncio.subprocess.Process | None = None
+
+    async def start(self) -> None:
+        self.proc = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", __name__, *self.args, stdout=asyncio.subprocess.PIPE
+        )
+        assert self.proc.stdout is not None
+        if await self.proc.stdout.readline() != b"ready\n":
+            raise RuntimeError("the probe did not start")
+
+    async def result(self) -> list[tuple[float, float]]:
+        assert self.proc is not None
+        out, _ = await asyncio.wait_for(self.proc.communicate(), self.seconds + 30)
+        if self.proc.returncode != 0:
+            raise RuntimeError(f"the probe failed (exit {self.proc.returncode})")
+        return [(t, ms) for t, ms in json.loads(out)]
+
+
+def _main() -> None:  # python -m pyopenshowvar_apps.heave.abuse HOST PORT SECONDS
+    host, port, seconds = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
+    out = asyncio.run(probe(host, port, seconds, ready=lambda: print("ready", flush=True)))
+    print(json.dumps(out))
+
+
+if __name__ == "__main__":
+    _main()

@@ -10,7 +10,9 @@
   ``NaN``, 2000-deep arrays, a binary frame), returning how the server closed;
 * :func:`closing_pages` — pages that press a jog button and go away while the server answers
   and streams to them (closing, or dropping the connection);
-* :func:`page_load` — the bystander: ``GET /`` over a fresh connection, timed;
+* :func:`page_load` — ``GET /`` over a fresh connection, timed; :func:`bystander` — a
+  legitimate page loading and following the live stream (:class:`BystanderProcess`: the same in
+  a process of its own);
 * :func:`axis_motion` — the robot seen over KVP for a while: how far and how fast it moved.
 
 Nothing here asserts: the suite and the bench decide what is acceptable. Every wait is bounded.
@@ -22,20 +24,27 @@ import asyncio
 import contextlib
 import json
 import random
+import sys
 import time
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from pyopenshowvar import Client
 
+from ..abusekit import AppProcess, AttackTally
+
 __all__ = [
     "CRAFTED",
     "ROGUE_WRITES",
     "AttackTally",
+    "BystanderProcess",
     "Motion",
+    "WebProcess",
     "axis_motion",
+    "bystander",
     "closing_pages",
     "crafted",
     "page_load",
@@ -63,17 +72,29 @@ CRAFTED: dict[str, str | bytes] = {
 }
 
 
-@dataclass
-class AttackTally:
-    """What the attackers did and saw."""
+class WebProcess(AppProcess):
+    """``kvp --port KVP_PORT web --http-port 0 ARGS...`` in its own process."""
 
-    connections: int = 0
-    #: Connections the server closed (or refused) on its own.
-    closed_by_server: int = 0
-    bytes_sent: int = 0
-    #: The attackers' own failures (a connect refused, a timeout): asserted by the suite.
-    errors: int = 0
-    notes: list[str] = field(default_factory=list)
+    def __init__(self, kvp_port: int, *args: str, token: str | None = None) -> None:
+        extra = ["--token", token] if token else []
+        super().__init__("--port", str(kvp_port), "web", "--http-port", "0", *extra, *args,
+                         expect="serving on http://")  # fmt: skip
+        self.token = token
+
+    @property
+    def port(self) -> int:
+        return int(self.first.removeprefix("serving on ").rstrip("/").rpartition(":")[2])
+
+    @property
+    def ws_url(self) -> str:
+        query = f"?token={self.token}" if self.token else ""
+        return f"ws://127.0.0.1:{self.port}/ws{query}"
+
+
+def _local(source: str | None) -> dict[str, Any]:
+    """``create_connection`` arguments binding the client to ``source`` (another loopback
+    address is another client address to the server)."""
+    return {"local_addr": (source, 0)} if source else {}
 
 
 async def rogue_page(
@@ -82,6 +103,7 @@ async def rogue_page(
     *,
     vanish: str = "close",
     timeout: float = 5.0,
+    source: str | None = None,
 ) -> list[dict[str, Any]]:
     """Connect, send each ``(name, value)`` as a watch-list write, wait for every answer, then
     vanish (``"close"``: a closing handshake; ``"abort"``: the TCP connection just drops).
@@ -91,7 +113,7 @@ async def rogue_page(
 
     answers: list[dict[str, Any]] = []
     async with asyncio.timeout(timeout):
-        ws = await connect(ws_url, max_queue=None, open_timeout=timeout)
+        ws = await connect(ws_url, max_queue=None, open_timeout=timeout, **_local(source))
         try:
             for n, (name, value) in enumerate(writes, 1):  # one at a time, as the page does
                 await ws.send(json.dumps({"t": "write", "id": n, "name": name, "value": value}))
@@ -157,19 +179,16 @@ async def slowloris(
     source: str | None = None,
 ) -> None:
     """Keep ``sockets`` connections each sending a request head one byte every ``interval``
-    seconds (never finishing it); reconnect when the server closes one. Until cancelled."""
+    seconds (never finishing it); when the server closes one, connect again on the next tick
+    (``interval`` later, as slowloris does). Until cancelled."""
     head = b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nX-Slow: " + b"a" * 10_000
 
     async def one() -> None:
         while True:
             try:
-                reader, writer = await asyncio.open_connection(
-                    host, port, local_addr=(source, 0) if source else None
-                )
+                reader, writer = await asyncio.open_connection(host, port, **_local(source))
             except OSError as exc:
-                tally.errors += 1
-                if len(tally.notes) < 5:
-                    tally.notes.append(f"connect: {exc}")
+                tally.error(f"connect: {exc}")
                 await asyncio.sleep(interval)
                 continue
             tally.connections += 1
@@ -179,16 +198,16 @@ async def slowloris(
                     tally.bytes_sent += 1
                     try:
                         # the server closing shows as EOF (or data: a refusal) before the next byte
-                        data = await asyncio.wait_for(reader.read(1024), interval)
+                        await asyncio.wait_for(reader.read(1024), interval)
                     except TimeoutError:
                         continue
-                    tally.closed_by_server += 1
-                    del data
                     break
+                tally.closed_by_server += 1
             except OSError:
                 tally.closed_by_server += 1
             finally:
                 writer.close()
+            await asyncio.sleep(interval)
 
     tasks = [asyncio.create_task(one()) for _ in range(sockets)]
     try:
@@ -207,9 +226,7 @@ async def page_load(
     t0 = time.monotonic()
     try:
         async with asyncio.timeout(timeout):
-            reader, writer = await asyncio.open_connection(
-                host, port, local_addr=(source, 0) if source else None
-            )
+            reader, writer = await asyncio.open_connection(host, port, **_local(source))
             try:
                 writer.write(b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n")
                 data = await reader.read()
@@ -221,13 +238,15 @@ async def page_load(
     return status, time.monotonic() - t0
 
 
-async def crafted(ws_url: str, message: str | bytes, *, timeout: float = 5.0) -> tuple[int, str]:
+async def crafted(
+    ws_url: str, message: str | bytes, *, timeout: float = 5.0, source: str | None = None
+) -> tuple[int, str]:
     """Send one crafted ``message``; (close code, close reason) as the server closed, or
     (0, what it answered instead) when it kept the connection open for ``timeout`` s."""
     from websockets.asyncio.client import connect
     from websockets.exceptions import ConnectionClosed
 
-    ws = await connect(ws_url, max_queue=None, open_timeout=timeout)
+    ws = await connect(ws_url, max_queue=None, open_timeout=timeout, **_local(source))
     try:
         await ws.send(message)
         async with asyncio.timeout(timeout):
@@ -243,7 +262,9 @@ async def crafted(ws_url: str, message: str | bytes, *, timeout: float = 5.0) ->
         await ws.close()
 
 
-async def closing_pages(ws_url: str, pages: int = 20, *, seed: int = 0) -> int:
+async def closing_pages(
+    ws_url: str, pages: int = 20, *, seed: int = 0, source: str | None = None
+) -> int:
     """``pages`` pages at once that press a jog button (1 % jog override), and close or drop
     their connection after a random 20-300 ms, half each, while the server streams to them
     and answers their press. Returns the pages that connected."""
@@ -255,7 +276,7 @@ async def closing_pages(ws_url: str, pages: int = 20, *, seed: int = 0) -> int:
 
     async def one(n: int, wait: float) -> int:
         try:
-            ws = await connect(ws_url, max_queue=None, open_timeout=5.0)
+            ws = await connect(ws_url, max_queue=None, open_timeout=5.0, **_local(source))
         except (OSError, TimeoutError, WebSocketException):  # beyond the server's page limit
             return 0
         with contextlib.suppress(Exception):
@@ -271,3 +292,73 @@ async def closing_pages(ws_url: str, pages: int = 20, *, seed: int = 0) -> int:
 
     waits = [rng.uniform(0.02, 0.3) for _ in range(pages)]
     return sum(await asyncio.gather(*(one(n, w) for n, w in enumerate(waits))))
+
+
+async def bystander(
+    port: int, ws_url: str, seconds: float, *, ready: Callable[[], None] | None = None
+) -> dict[str, list[list[float]]]:
+    """A legitimate page for ``seconds``: ``GET /`` every 50 ms (``loads``: monotonic start,
+    HTTP status, seconds) while it follows the live stream (``states``: monotonic arrival of
+    each state). ``ready`` is called once the page is connected."""
+    from websockets.asyncio.client import connect
+
+    loads: list[list[float]] = []
+    states: list[list[float]] = []
+    ws = await connect(ws_url, max_queue=None, open_timeout=5.0)
+
+    async def follow() -> None:
+        async for raw in ws:
+            if json.loads(raw).get("t") == "state":
+                states.append([time.monotonic()])
+
+    follower = asyncio.create_task(follow())
+    if ready is not None:
+        ready()
+    end = time.monotonic() + seconds
+    try:
+        while (t0 := time.monotonic()) < end:
+            status, took = await page_load("127.0.0.1", port)
+            loads.append([t0, float(status), took])
+            await asyncio.sleep(0.05)
+    finally:
+        follower.cancel()
+        await asyncio.gather(follower, return_exceptions=True)
+        await ws.close()
+    return {"loads": loads, "states": states}
+
+
+class BystanderProcess:
+    """:func:`bystander` in a process of its own, so the attackers' event loop does not slow
+    it down: ``await start()``, then ``await result()`` (monotonic clocks agree across the
+    processes of one machine, so the samples can be split by when the attack ran)."""
+
+    def __init__(self, port: int, ws_url: str, seconds: float) -> None:
+        self.args = (str(port), ws_url, str(seconds))
+        self.seconds = seconds
+        self.proc: asyncio.subprocess.Process | None = None
+
+    async def start(self) -> None:
+        self.proc = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", __name__, *self.args, stdout=asyncio.subprocess.PIPE
+        )
+        assert self.proc.stdout is not None
+        if await self.proc.stdout.readline() != b"ready\n":
+            raise RuntimeError("the bystander did not start")
+
+    async def result(self) -> dict[str, list[list[float]]]:
+        assert self.proc is not None
+        out, _ = await asyncio.wait_for(self.proc.communicate(), self.seconds + 30)
+        if self.proc.returncode != 0:
+            raise RuntimeError(f"the bystander failed (exit {self.proc.returncode})")
+        result: dict[str, list[list[float]]] = json.loads(out)
+        return result
+
+
+def _main() -> None:  # python -m pyopenshowvar_apps.web.abuse HTTP_PORT WS_URL SECONDS
+    port, url, seconds = int(sys.argv[1]), sys.argv[2], float(sys.argv[3])
+    out = asyncio.run(bystander(port, url, seconds, ready=lambda: print("ready", flush=True)))
+    print(json.dumps(out))
+
+
+if __name__ == "__main__":
+    _main()
