@@ -16,7 +16,6 @@ import json
 import logging
 import time
 from collections.abc import AsyncIterator, Iterator
-from typing import Any
 
 import numpy as np
 import pytest
@@ -32,7 +31,7 @@ from pyopenshowvar_apps.web.abuse import (
 )
 from pyopenshowvar_apps.web.jogplan import CADENCE
 from pyopenshowvar_apps.web.runner import WebServer
-from test_web_jog import JOG, STILL, TOKEN, hold, jog_config, page, settled, until
+from test_web_jog import JOG, STILL, TOKEN, ask, hold, jog_config, page, settled, until
 from websockets.asyncio.client import connect
 
 from kukavarproxy_emu import Emulator
@@ -144,7 +143,7 @@ async def test_a_keep_alive_cannot_change_its_button(
     ws = await page(web)
     await hold(ws, 0.1)
     assert web.jog.jog is not None and web.jog.jog.req.key == "A1"
-    answer = await _ask(ws, {**JOG, "key": "A2"})  # the same press, another axis
+    answer = await ask(ws, {**JOG, "key": "A2"})  # the same press, another axis
     assert answer == {
         "t": "refused",
         "press": 1,
@@ -162,23 +161,21 @@ async def test_the_jog_override_is_clamped_to_the_jog_speeds(
     rig: tuple[Emulator, WebServer, Client],
 ) -> None:
     _, web, _ = rig
+    web.jog.hold_timeout = 5.0  # a loaded machine must not end these presses early
     ws = await page(web)
-    await hold(ws, 0.05, {**JOG, "ov": 1e300})
+
+    async def jogging(press: int) -> bool:
+        return web.jog.jog is not None and web.jog.jog.press == press
+
+    await ws.send(json.dumps({**JOG, "ov": 1e300}))
+    await until(lambda: jogging(1))
     assert web.jog.jog is not None
     assert web.jog.jog.req.override == 100.0 and web.jog.jog.plan.speed == 15.0
-    await ws.send(json.dumps({"t": "release"}))
-    await hold(ws, 0.05, {**JOG, "press": 2, "ov": -5})
+    await ws.send(json.dumps({**JOG, "press": 2, "ov": -5}))
+    await until(lambda: jogging(2))
     assert web.jog.jog is not None and web.jog.jog.req.override == 1.0
+    await ws.send(json.dumps({"t": "release"}))
     await ws.close()
-
-
-async def _ask(ws: Any, msg: dict[str, Any]) -> dict[str, Any]:
-    await ws.send(json.dumps(msg))
-    async with asyncio.timeout(5):
-        while True:
-            answer = json.loads(await ws.recv())
-            if answer["t"] in ("result", "error", "refused"):
-                return dict(answer)
 
 
 # --- item: hostile HTTP and WebSocket traffic -------------------------------------------------

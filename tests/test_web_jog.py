@@ -345,7 +345,7 @@ async def ask(ws: ClientConnection, msg: dict[str, Any]) -> dict[str, Any]:
     async with asyncio.timeout(5):
         while True:
             answer = json.loads(await ws.recv())
-            if answer["t"] in ("result", "error", "refused"):
+            if answer.get("t") in ("result", "error", "refused"):
                 return dict(answer)
 
 

@@ -6,7 +6,9 @@ Pure functions, no I/O: the end-to-end behaviour over real sockets is in test_we
 from __future__ import annotations
 
 import json
+import logging
 import re
+import time
 from typing import Any
 
 import pytest
@@ -285,3 +287,21 @@ def test_the_policy_constants() -> None:
     assert (policy.MAX_DEPTH, policy.MAX_NAME, policy.MAX_PRESS) == (4, 64, 2**31 - 1)
     assert policy.MOTION_PREFIXES == ("$", "@", "EMU_")
     assert json.loads(json.dumps(sorted(JOG_VARIABLES)))  # plain names
+
+
+def test_log_limit_keeps_attackers_out_of_the_log(caplog: pytest.LogCaptureFixture) -> None:
+    from pyopenshowvar_apps.web.httpguard import LogLimit
+
+    logger = logging.getLogger("test.loglimit")
+    limit = LogLimit(logger, period=0.2)
+    with caplog.at_level(logging.WARNING, logger="test.loglimit"):
+        for _ in range(50):
+            limit.warning("a", "refused %s", "a")
+        limit.warning("b", "refused %s", "b")
+        time.sleep(0.25)
+        limit.warning("a", "refused %s", "a")
+    assert [r.getMessage() for r in caplog.records] == [
+        "refused a",
+        "refused b",
+        "refused a (and 49 more like it)",
+    ]

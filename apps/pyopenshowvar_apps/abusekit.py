@@ -1,10 +1,12 @@
-"""What the attack tools of the apps share: a ``kvp`` command in its own process, its peak memory,
-and the attackers' tally (:mod:`.web.abuse`, :mod:`.heave.abuse`, ``tests/abuse``, ``bench``).
+"""What the attack tools of the apps share (:mod:`.web.abuse`, :mod:`.heave.abuse`,
+``tests/abuse``, ``bench/app_abuse.py``), on top of the emulator's (:mod:`kukavarproxy_emu.abuse`):
 
 * :class:`AppProcess` — ``kvp ARGS...`` in a subprocess, started once its first line says where
   it serves; its stderr goes to a file, so the tracebacks it printed can be counted;
 * :class:`PeakMemory` — a thread sampling a process' resident memory every few ms, so a suite
   sees the peak *during* an attack, not what is left once the attackers have gone;
+* :class:`ChildProbe` / :func:`run_child_probe` — a bystander in a process of its own, so the
+  attackers' event loop (and GIL) does not slow it down;
 * :class:`AttackTally` — what the attackers did and saw, their own failures included.
 
 Nothing here asserts.
@@ -12,56 +14,49 @@ Nothing here asserts.
 
 from __future__ import annotations
 
+import asyncio
+import json
 import os
-import signal
 import subprocess
 import sys
 import tempfile
 import threading
+from collections.abc import Callable, Coroutine
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
-from typing import Self
+from typing import Any, Self
 
-__all__ = ["AppProcess", "AttackTally", "PeakMemory", "rss_mb"]
+from kukavarproxy_emu.abuse import AbuseTally, EmulatorProcess
+
+__all__ = ["AppProcess", "AttackTally", "ChildProbe", "PeakMemory", "run_child_probe"]
 
 
 @dataclass
-class AttackTally:
-    """What the attackers did and saw."""
+class AttackTally(AbuseTally):
+    """:class:`~kukavarproxy_emu.abuse.AbuseTally` (connections, requests, replies, wrong,
+    errors) and what an attack on an app counts besides."""
 
-    connections: int = 0
     #: Connections the server closed (or refused) on its own.
     closed_by_server: int = 0
-    #: Messages or requests sent, and answers read.
-    sent: int = 0
-    answers: int = 0
     bytes_sent: int = 0
-    #: The attackers' own failures (a connect that failed, an answer that never came): the
-    #: suite asserts there are none, so an attack that silently did nothing cannot pass.
-    errors: int = 0
     notes: list[str] = field(default_factory=list)
 
     def error(self, what: str) -> None:
+        """One failure of the attacker itself (a connect that failed, an answer that never
+        came): the suites assert there are none, so an attack that did nothing cannot pass."""
         self.errors += 1
         if len(self.notes) < 10:
             self.notes.append(what)
 
 
-def rss_mb(pid: int) -> float:
-    """Resident set size of ``pid`` in MB (Linux ``/proc``)."""
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) * 1024 / 1e6
-    raise RuntimeError("no VmRSS")
-
-
 class PeakMemory:
-    """``with PeakMemory(pid) as mem: ...``; then ``mem.peak`` (MB) of what was sampled."""
+    """``with PeakMemory(process.rss_mb) as mem: ...``; then ``mem.peak`` (MB) of what was
+    sampled every ``period`` seconds, and ``mem.start``."""
 
-    def __init__(self, pid: int, period: float = 0.01) -> None:
-        self.pid, self.period = pid, period
-        self.start = self.peak = rss_mb(pid)
+    def __init__(self, rss_mb: Callable[[], float], period: float = 0.01) -> None:
+        self.rss_mb, self.period = rss_mb, period
+        self.start = self.peak = rss_mb()
         self.samples = 0
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="peak-rss", daemon=True)
@@ -69,7 +64,7 @@ class PeakMemory:
     def _run(self) -> None:
         while not self._stop.wait(self.period):
             try:
-                self.peak = max(self.peak, rss_mb(self.pid))
+                self.peak = max(self.peak, self.rss_mb())
             except (OSError, RuntimeError):
                 return  # the process is gone: the suite sees that on its own
             self.samples += 1
@@ -88,16 +83,17 @@ class PeakMemory:
         self._thread.join(5.0)
 
 
-class AppProcess:
-    """``kvp ARGS...`` in a subprocess; :attr:`first` is its first line (where it serves)."""
+class AppProcess(EmulatorProcess):
+    """``kvp ARGS...`` in a subprocess (``with`` stops it, SIGTERM); :attr:`first` is its first
+    line, which must start with ``expect``."""
 
     def __init__(self, *args: str, expect: str) -> None:
-        self.args, self.expect = list(args), expect
+        super().__init__(*args)
+        self.expect = expect
         self.err = tempfile.TemporaryFile(mode="w+")
-        self.proc: subprocess.Popen[str] | None = None
         self.first = ""
 
-    def __enter__(self) -> Self:
+    def start(self) -> Self:
         kvp = str(Path(sys.executable).with_name("kvp"))
         self.proc = subprocess.Popen(
             [kvp, *self.args],
@@ -113,14 +109,6 @@ class AppProcess:
             raise RuntimeError(f"kvp {' '.join(self.args)} did not start: {self.first!r}")
         return self
 
-    @property
-    def pid(self) -> int:
-        assert self.proc is not None
-        return self.proc.pid
-
-    def alive(self) -> bool:
-        return self.proc is not None and self.proc.poll() is None
-
     def stderr(self) -> str:
         self.err.seek(0)
         return self.err.read()
@@ -128,27 +116,46 @@ class AppProcess:
     def tracebacks(self) -> int:
         return self.stderr().count("Traceback")
 
-    def stop(self) -> int | None:
-        """SIGINT (Ctrl-C) and wait: the exit status, or None if it had to be killed."""
-        if self.proc is None:
-            return None
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-        try:
-            return self.proc.wait(10)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait(5)
-            return None
-        finally:
-            if self.proc.stdout is not None:
-                self.proc.stdout.close()
-
     def __exit__(
         self,
         exc_type: type[BaseException] | None,
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        self.stop()
+        super().__exit__(exc_type, exc, tb)
+        if self.proc is not None and self.proc.stdout is not None:
+            self.proc.stdout.close()
         self.err.close()
+
+
+class ChildProbe:
+    """``python -m MODULE ARGS...`` (whose main is :func:`run_child_probe`): ``await start()``
+    returns once it is connected, ``await result()`` gives what it measured (JSON). Monotonic
+    clocks agree across the processes of one machine, so its samples can be split by when an
+    attack ran."""
+
+    def __init__(self, module: str, *args: str, seconds: float) -> None:
+        self.module, self.args, self.seconds = module, args, seconds
+        self.proc: asyncio.subprocess.Process | None = None
+
+    async def start(self) -> None:
+        self.proc = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", self.module, *self.args, stdout=asyncio.subprocess.PIPE
+        )
+        assert self.proc.stdout is not None
+        if await self.proc.stdout.readline() != b"ready\n":
+            raise RuntimeError(f"{self.module} did not start")
+
+    async def result(self) -> Any:
+        assert self.proc is not None
+        out, _ = await asyncio.wait_for(self.proc.communicate(), self.seconds + 30)
+        if self.proc.returncode != 0:
+            raise RuntimeError(f"{self.module} failed (exit {self.proc.returncode})")
+        return json.loads(out)
+
+
+def run_child_probe(probe: Callable[[Callable[[], None]], Coroutine[Any, Any, Any]]) -> None:
+    """The child's side of :class:`ChildProbe`: ``probe(ready)`` calls ``ready()`` once
+    connected; what it returns is printed as JSON."""
+    out = asyncio.run(probe(lambda: print("ready", flush=True)))
+    print(json.dumps(out))

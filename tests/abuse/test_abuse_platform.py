@@ -20,7 +20,7 @@ from collections.abc import Iterator
 
 import pytest
 from pyopenshowvar_apps.abusekit import AttackTally, PeakMemory
-from pyopenshowvar_apps.heave.abuse import PlatformProcess, ProbeProcess, flood, garbage, idle
+from pyopenshowvar_apps.heave.abuse import PlatformProcess, flood, garbage, idle, probe_process
 from pyopenshowvar_apps.heave.master import PlatformClient
 
 pytestmark = [
@@ -47,11 +47,11 @@ def test_garbage_floods_and_idle_connections_with_a_bystander(plc: PlatformProce
     async def run() -> tuple[list[float], list[float], dict[str, AttackTally], PeakMemory, int]:
         async with PlatformClient(plc.host, plc.port) as master:
             cycle0 = (await master.read_state()).cycle
-        bystander = ProbeProcess(plc.host, plc.port, 0.3 + BASELINE + SECONDS)
+        bystander = probe_process(plc.host, plc.port, 0.3 + BASELINE + SECONDS)
         await bystander.start()
         await asyncio.sleep(0.3 + BASELINE)  # a warm-up, then the baseline
         tallies = {name: AttackTally() for name in ("garbage", "flood", "idle")}
-        with PeakMemory(plc.pid) as memory:
+        with PeakMemory(plc.rss_mb) as memory:
             attack_start = time.monotonic()
             tasks = [
                 *(asyncio.create_task(garbage(plc.host, plc.port, tallies["garbage"], seed=s))
@@ -79,7 +79,7 @@ def test_garbage_floods_and_idle_connections_with_a_bystander(plc: PlatformProce
         f"bystander read p50/p99 {b50:.2f}/{b99:.2f} -> {d50:.2f}/{d99:.2f} ms ({len(base)} ->"
         f" {len(during)} reads); {scans} scans; peak RSS {memory.start:.0f} ->"
         f" {memory.peak:.0f} MB; "
-        + ", ".join(f"{n}: {t.connections} conns, {t.sent} sent" for n, t in tallies.items())
+        + ", ".join(f"{n}: {t.connections} conns, {t.requests} sent" for n, t in tallies.items())
     )
     assert plc.alive() and plc.tracebacks() == 0, plc.stderr()[-3000:]
     assert base and len(during) > 0.2 * len(base) * (SECONDS - 0.2) / BASELINE
@@ -91,4 +91,4 @@ def test_garbage_floods_and_idle_connections_with_a_bystander(plc: PlatformProce
         assert tally.errors == 0, (name, tally.notes)
     assert tallies["garbage"].connections > 20 and tallies["idle"].connections == 50
     flooded = tallies["flood"]
-    assert flooded.answers > 20 and flooded.answers >= flooded.sent - 1  # the last: cancelled
+    assert flooded.replies > 20 and flooded.replies >= flooded.requests - 1  # the last: cancelled

@@ -30,8 +30,8 @@ from pyopenshowvar_apps.abusekit import AttackTally, PeakMemory
 from pyopenshowvar_apps.web.abuse import (
     CRAFTED,
     ROGUE_WRITES,
-    BystanderProcess,
     WebProcess,
+    bystander_process,
     closing_pages,
     crafted,
     rogue_page,
@@ -40,7 +40,7 @@ from pyopenshowvar_apps.web.abuse import (
 from pyopenshowvar_apps.web.jogplan import AXIS_SPEED, CADENCE, CREDIT
 from pyopenshowvar_apps.web.runner import KRL_DIR
 from websockets.asyncio.client import connect
-from websockets.exceptions import ConnectionClosed, WebSocketException
+from websockets.exceptions import ConnectionClosed, InvalidStatus, WebSocketException
 
 from kukavarproxy_emu.abuse import EmulatorProcess
 from pyopenshowvar import Client
@@ -76,9 +76,13 @@ async def _forever(tally: AttackTally, one: Callable[[], Coroutine[Any, Any, boo
         try:
             if not await one():
                 tally.error("an attack did not get the answer it expected")
+        except InvalidStatus as exc:  # 16 pages at once: the server's own limit, not a failure
+            if exc.response.status_code != 403:
+                tally.error(f"{type(exc).__name__}: {exc}")
+            tally.closed_by_server += 1
         except (OSError, TimeoutError, WebSocketException) as exc:
             tally.error(f"{type(exc).__name__}: {exc}")
-        tally.sent += 1
+        tally.requests += 1
         await asyncio.sleep(0.05)
 
 
@@ -87,7 +91,7 @@ async def crafted_messages(web: WebProcess, tally: AttackTally) -> None:
 
     async def one() -> bool:
         code, _ = await crafted(
-            web.ws_url, messages[tally.sent % len(messages)], source="127.0.0.3"
+            web.ws_url, messages[tally.requests % len(messages)], source="127.0.0.3"
         )
         tally.closed_by_server += code in (1003, 1007)
         return code in (1003, 1007)
@@ -98,7 +102,7 @@ async def crafted_messages(web: WebProcess, tally: AttackTally) -> None:
 async def rogue_pages(web: WebProcess, tally: AttackTally) -> None:
     async def one() -> bool:
         answers = await rogue_page(web.ws_url, ROGUE_WRITES, vanish="abort", source="127.0.0.4")
-        tally.answers += len(answers)
+        tally.replies += len(answers)
         return all("belongs to the jog program" in str(a.get("error")) for a in answers)
 
     await _forever(tally, one)
@@ -106,7 +110,7 @@ async def rogue_pages(web: WebProcess, tally: AttackTally) -> None:
 
 async def vanishing_pages(web: WebProcess, tally: AttackTally) -> None:
     async def one() -> bool:
-        connected = await closing_pages(web.ws_url, 8, seed=tally.sent, source="127.0.0.5")
+        connected = await closing_pages(web.ws_url, 8, seed=tally.requests, source="127.0.0.5")
         tally.connections += connected
         return connected > 0
 
@@ -121,7 +125,7 @@ async def flood(web: WebProcess, tally: AttackTally) -> None:
             web.ws_url, max_queue=None, open_timeout=5.0, local_addr=("127.0.0.6", 0)
         )
         try:
-            big = tally.sent % 2 == 1
+            big = tally.requests % 2 == 1
             for _ in range(1 if big else 1000):
                 await ws.send("x" * 10_000 if big else '{"t": "watch", "names": []}')
             async with asyncio.timeout(5):
@@ -178,12 +182,12 @@ def test_every_attack_at_once_with_a_bystander(rig: Rig) -> None:
             async with asyncio.timeout(20):
                 while await kvp.read("$PRO_STATE1") != "#P_ACTIVE":  # noqa: ASYNC110
                     await asyncio.sleep(0.05)
-            page = BystanderProcess(web.port, web.ws_url, WARM + BASELINE + SECONDS)
+            page = bystander_process(web.port, web.ws_url, WARM + BASELINE + SECONDS)
             await page.start()
             await asyncio.sleep(WARM + BASELINE)  # a warm-up, then the baseline
             q0 = await kvp.read_joint_angles()
             tallies = {name: AttackTally() for name in ATTACKS}
-            with PeakMemory(web.pid) as memory:
+            with PeakMemory(web.rss_mb) as memory:
                 attack_start = time.monotonic()
                 tasks = [asyncio.create_task(attack(web, tallies[name]))
                          for name, attack in ATTACKS.items()]  # fmt: skip
@@ -194,9 +198,17 @@ def test_every_attack_at_once_with_a_bystander(rig: Rig) -> None:
                     task.cancel()
                 await asyncio.gather(*tasks, return_exceptions=True)
             commands = COMMANDS[:]
-            await asyncio.sleep(0.5)  # the last jog of a vanished page has stopped
-            moved = float(np.max(np.abs(await kvp.read_joint_angles() - q0)))
-            idle = await kvp.read("JOG_MODE")
+            async with asyncio.timeout(5):  # the last jog of a vanished page stops on its own
+                while True:
+                    q = await kvp.read_joint_angles()
+                    await asyncio.sleep(0.2)
+                    if np.max(np.abs(await kvp.read_joint_angles() - q)) < 1e-3:
+                        break
+            moved = float(np.max(np.abs(q - q0)))
+            values = await kvp.read_many(["JOG_MODE", "JOG_UNTIL", "JOG_COUNT"])
+            idle = values["JOG_MODE"].text == "0" or int(values["JOG_UNTIL"].text) <= int(
+                values["JOG_COUNT"].text
+            )
         return seen, attack_start, tallies, memory, moved, commands, idle
 
     seen, attack_start, tallies, memory, moved, commands, idle = asyncio.run(run())
@@ -213,7 +225,9 @@ def test_every_attack_at_once_with_a_bystander(rig: Rig) -> None:
         f" ({len(base)} -> {len(during)} loads); live-state gap {b_gap * 1e3:.0f} ->"
         f" {d_gap * 1e3:.0f} ms; peak RSS {memory.start:.0f} -> {memory.peak:.0f} MB"
         f" ({memory.samples} samples); "
-        + ", ".join(f"{n}: {t.sent} sent, {t.closed_by_server} closed" for n, t in tallies.items())
+        + ", ".join(
+            f"{n}: {t.requests} sent, {t.closed_by_server} closed" for n, t in tallies.items()
+        )
     )
     assert web.alive() and web.tracebacks() == 0, web.stderr()[-3000:]
     assert {s for s, _ in base} == {200} and {s for s, _ in during} == {200}, during
@@ -221,19 +235,19 @@ def test_every_attack_at_once_with_a_bystander(rig: Rig) -> None:
     # The attackers take what the server gives them (it serves them too): the bystander's loads
     # may slow down by a bounded factor of the same machine's baseline, and stay under the 1 s
     # a page must load in (or 10 times the baseline's slowest, on a machine that slow).
-    assert d50 <= max(10 * b50, b50 + 0.3)
+    assert d50 <= max(10 * b50, b50 + 0.5)
     assert d_max <= max(1.0, 10 * b_max)
     assert d_gap <= max(10 * b_gap, b_gap + 0.5)
     assert memory.samples > 100 and memory.peak - memory.start <= PEAK_GROWTH_MB
     # The rogue pages' writes never landed: the only jogs were the vanishing pages' presses at
     # 1 % jog override, each with the server's own increment and deadline; all stopped.
-    assert len(commands) > 20 and idle == "0"
+    assert len(commands) > 20 and idle  # nothing more is planned
     for increment, ahead in commands:
         assert abs(increment) <= AXIS_SPEED[0] * 0.01 * CADENCE + 1e-6 and ahead <= CREDIT
     assert moved <= AXIS_SPEED[0] * 0.01 * (SECONDS + 1.0)
     for name, tally in tallies.items():
         assert tally.errors == 0, (name, tally.notes)
-        assert tally.sent + tally.connections > 0, name
+        assert tally.requests + tally.connections > 0, name
     assert tallies["slowloris"].closed_by_server >= 80 - 16  # refused beyond the per-address cap
     assert tallies["crafted"].closed_by_server >= len(CRAFTED)
     assert tallies["flood"].closed_by_server >= 2

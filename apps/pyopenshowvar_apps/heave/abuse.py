@@ -13,7 +13,7 @@
   broken MBAP headers), :func:`flood` (reads back to back, as fast as answered) and :func:`idle`
   (connections that say nothing);
 * :func:`probe` — the bystander: a master reading the state block, one request at a time
-  (:class:`ProbeProcess`: the same in a process of its own).
+  (:func:`probe_process`: the same in a process of its own).
 
 Nothing here asserts: the suite and the bench decide what is acceptable. Every wait is bounded.
 """
@@ -21,23 +21,23 @@ Nothing here asserts: the suite and the bench decide what is acceptable. Every w
 from __future__ import annotations
 
 import asyncio
-import json
 import random
 import struct
 import sys
 import time
 from collections.abc import Callable
+from typing import Self
 
-from ..abusekit import AppProcess, AttackTally
+from ..abusekit import AppProcess, AttackTally, ChildProbe, run_child_probe
 from . import registers as reg
 
 __all__ = [
     "PlatformProcess",
-    "ProbeProcess",
     "flood",
     "garbage",
     "idle",
     "probe",
+    "probe_process",
     "silent_master",
     "write_refusal",
 ]
@@ -49,13 +49,11 @@ class PlatformProcess(AppProcess):
     def __init__(self, *args: str) -> None:
         super().__init__("platform", "--port", "0", *args, expect="platform PLC on modbus://")
 
-    @property
-    def host(self) -> str:
-        return self.first.removeprefix("platform PLC on modbus://").rpartition(":")[0]
-
-    @property
-    def port(self) -> int:
-        return int(self.first.rpartition(":")[2])
+    def start(self) -> Self:
+        super().start()
+        host, _, port = self.first.removeprefix("platform PLC on modbus://").rpartition(":")
+        self.host, self.port = host, int(port)
+        return self
 
 
 async def _client(host: str, port: int) -> object:
@@ -160,7 +158,7 @@ async def flood(host: str, port: int, tally: AttackTally) -> None:
             request = _frame(n, struct.pack(">BHH", 4, 0, reg.INPUT_COUNT))
             writer.write(request)
             tally.bytes_sent += len(request)
-            tally.sent += 1
+            tally.requests += 1
             try:
                 async with asyncio.timeout(2.0):
                     data = await reader.readexactly(answer)
@@ -170,7 +168,7 @@ async def flood(host: str, port: int, tally: AttackTally) -> None:
             except asyncio.IncompleteReadError:
                 tally.closed_by_server += 1
                 return
-            tally.answers += int(data[:2] == request[:2])
+            tally.replies += int(data[:2] == request[:2])
     finally:
         writer.close()
 
@@ -215,37 +213,13 @@ async def probe(
     return out
 
 
-class ProbeProcess:
-    """:func:`probe` in a process of its own, so the attackers' event loop does not slow the
-    bystander down: ``start()``, then ``await result()`` (monotonic clocks agree across
-    processes on one machine, so the samples can be split by when the attack ran)."""
-
-    def __init__(self, host: str, port: int, seconds: float) -> None:
-        self.args = (host, str(port), str(seconds))
-        self.seconds = seconds
-        self.proc: asyncio.subprocess.Process | None = None
-
-    async def start(self) -> None:
-        self.proc = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", __name__, *self.args, stdout=asyncio.subprocess.PIPE
-        )
-        assert self.proc.stdout is not None
-        if await self.proc.stdout.readline() != b"ready\n":
-            raise RuntimeError("the probe did not start")
-
-    async def result(self) -> list[tuple[float, float]]:
-        assert self.proc is not None
-        out, _ = await asyncio.wait_for(self.proc.communicate(), self.seconds + 30)
-        if self.proc.returncode != 0:
-            raise RuntimeError(f"the probe failed (exit {self.proc.returncode})")
-        return [(t, ms) for t, ms in json.loads(out)]
+def probe_process(host: str, port: int, seconds: float) -> ChildProbe:
+    """:func:`probe` in a process of its own (``await start()``, then ``await result()``: a
+    list of [monotonic start, ms])."""
+    return ChildProbe(__name__, host, str(port), str(seconds), seconds=seconds)
 
 
-def _main() -> None:  # python -m pyopenshowvar_apps.heave.abuse HOST PORT SECONDS
-    host, port, seconds = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
-    out = asyncio.run(probe(host, port, seconds, ready=lambda: print("ready", flush=True)))
-    print(json.dumps(out))
-
-
-if __name__ == "__main__":
-    _main()
+if __name__ == "__main__":  # python -m pyopenshowvar_apps.heave.abuse HOST PORT SECONDS
+    run_child_probe(
+        lambda ready: probe(sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), ready=ready)
+    )

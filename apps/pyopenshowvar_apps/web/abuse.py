@@ -11,7 +11,7 @@
 * :func:`closing_pages` — pages that press a jog button and go away while the server answers
   and streams to them (closing, or dropping the connection);
 * :func:`page_load` — ``GET /`` over a fresh connection, timed; :func:`bystander` — a
-  legitimate page loading and following the live stream (:class:`BystanderProcess`: the same in
+  legitimate page loading and following the live stream (:func:`bystander_process`: the same in
   a process of its own);
 * :func:`axis_motion` — the robot seen over KVP for a while: how far and how fast it moved.
 
@@ -28,23 +28,23 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Self
 
 import numpy as np
 
 from pyopenshowvar import Client
 
-from ..abusekit import AppProcess, AttackTally
+from ..abusekit import AppProcess, AttackTally, ChildProbe, run_child_probe
 
 __all__ = [
     "CRAFTED",
     "ROGUE_WRITES",
     "AttackTally",
-    "BystanderProcess",
     "Motion",
     "WebProcess",
     "axis_motion",
     "bystander",
+    "bystander_process",
     "closing_pages",
     "crafted",
     "page_load",
@@ -81,9 +81,10 @@ class WebProcess(AppProcess):
                          expect="serving on http://")  # fmt: skip
         self.token = token
 
-    @property
-    def port(self) -> int:
-        return int(self.first.removeprefix("serving on ").rstrip("/").rpartition(":")[2])
+    def start(self) -> Self:
+        super().start()
+        self.port = int(self.first.removeprefix("serving on ").rstrip("/").rpartition(":")[2])
+        return self
 
     @property
     def ws_url(self) -> str:
@@ -327,38 +328,12 @@ async def bystander(
     return {"loads": loads, "states": states}
 
 
-class BystanderProcess:
-    """:func:`bystander` in a process of its own, so the attackers' event loop does not slow
-    it down: ``await start()``, then ``await result()`` (monotonic clocks agree across the
-    processes of one machine, so the samples can be split by when the attack ran)."""
-
-    def __init__(self, port: int, ws_url: str, seconds: float) -> None:
-        self.args = (str(port), ws_url, str(seconds))
-        self.seconds = seconds
-        self.proc: asyncio.subprocess.Process | None = None
-
-    async def start(self) -> None:
-        self.proc = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", __name__, *self.args, stdout=asyncio.subprocess.PIPE
-        )
-        assert self.proc.stdout is not None
-        if await self.proc.stdout.readline() != b"ready\n":
-            raise RuntimeError("the bystander did not start")
-
-    async def result(self) -> dict[str, list[list[float]]]:
-        assert self.proc is not None
-        out, _ = await asyncio.wait_for(self.proc.communicate(), self.seconds + 30)
-        if self.proc.returncode != 0:
-            raise RuntimeError(f"the bystander failed (exit {self.proc.returncode})")
-        result: dict[str, list[list[float]]] = json.loads(out)
-        return result
+def bystander_process(port: int, ws_url: str, seconds: float) -> ChildProbe:
+    """:func:`bystander` in a process of its own (``await start()``, then ``await result()``)."""
+    return ChildProbe(__name__, str(port), ws_url, str(seconds), seconds=seconds)
 
 
-def _main() -> None:  # python -m pyopenshowvar_apps.web.abuse HTTP_PORT WS_URL SECONDS
-    port, url, seconds = int(sys.argv[1]), sys.argv[2], float(sys.argv[3])
-    out = asyncio.run(bystander(port, url, seconds, ready=lambda: print("ready", flush=True)))
-    print(json.dumps(out))
-
-
-if __name__ == "__main__":
-    _main()
+if __name__ == "__main__":  # python -m pyopenshowvar_apps.web.abuse HTTP_PORT WS_URL SECONDS
+    run_child_probe(
+        lambda ready: bystander(int(sys.argv[1]), sys.argv[2], float(sys.argv[3]), ready=ready)
+    )

@@ -22,12 +22,21 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
+import time
 from typing import Any
 
 from uvicorn.protocols.http.h11_impl import H11Protocol
 from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 
-__all__ = ["HEAD_TIMEOUT", "PER_ADDRESS", "TOTAL", "ConnectionGuard", "guarded_protocols"]
+__all__ = [
+    "HEAD_TIMEOUT",
+    "PER_ADDRESS",
+    "TOTAL",
+    "ConnectionGuard",
+    "LogLimit",
+    "guarded_protocols",
+]
 
 log = logging.getLogger(__name__)
 
@@ -41,6 +50,27 @@ TOTAL = 64
 
 _TIMEOUT = b"HTTP/1.1 408 Request Timeout\r\nConnection: close\r\nContent-Length: 0\r\n\r\n"
 _BUSY = b"HTTP/1.1 503 Service Unavailable\r\nConnection: close\r\nContent-Length: 0\r\n\r\n"
+
+
+class LogLimit:
+    """At most one log line per key every ``period`` seconds; the next one says how many were
+    left out. An attacker must not be able to fill the log (or spend the server's time on it)."""
+
+    def __init__(self, logger: logging.Logger, period: float = 10.0) -> None:
+        self.logger, self.period = logger, period
+        self._last: dict[str, tuple[float, int]] = {}
+
+    def warning(self, key: str, message: str, *args: object) -> None:
+        now = time.monotonic()
+        last, skipped = self._last.get(key, (-math.inf, 0))
+        if now - last < self.period:
+            self._last[key] = (last, skipped + 1)
+            return
+        if len(self._last) > 1000:  # bounded: forget the quiet keys
+            self._last = {k: v for k, v in self._last.items() if now - v[0] < self.period}
+        self._last[key] = (now, 0)
+        more = f" (and {skipped} more like it)" if skipped else ""
+        self.logger.warning(message + more, *args)
 
 
 class ConnectionGuard:
@@ -59,6 +89,7 @@ class ConnectionGuard:
         #: Connections refused for a cap, and closed for a late request head.
         self.refused = 0
         self.timed_out = 0
+        self.log = LogLimit(log)
 
     @staticmethod
     def address(transport: asyncio.BaseTransport) -> str:
@@ -103,7 +134,8 @@ def guarded_protocols(
             if not guard.admit(transport):
                 self._refused = True
                 self.transport = transport
-                log.warning("refused a connection from %s: too many", guard.address(transport))
+                address = guard.address(transport)
+                guard.log.warning(address, "refused connections from %s: too many", address)
                 transport.write(_BUSY)
                 transport.close()
                 return

@@ -47,6 +47,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect, WebSocketDiscon
 from pyopenshowvar import KvpError
 from pyopenshowvar_apps.writecheck import check_literal, checked_write
 
+from .httpguard import LogLimit
 from .jog import JogController
 from .jogplan import AXIS_SPEED, CADENCE, CART_SPEED, STEP_SIZES
 from .link import MAX_WATCH, RobotLink
@@ -121,6 +122,7 @@ def create_app(link: RobotLink, jog: JogController, config: WebConfig) -> Starle
     """The Starlette application (the caller runs it with uvicorn and runs ``link``/``jog``)."""
     pages: set[_Page] = set()
     tasks: set[asyncio.Task[None]] = set()  # KVP requests of the pages, referenced until done
+    limit = LogLimit(log)  # what pages do wrong is logged, but never floods the log
 
     def on_state(state: dict[str, Any]) -> None:
         for page in pages:
@@ -174,7 +176,8 @@ def create_app(link: RobotLink, jog: JogController, config: WebConfig) -> Starle
             config.token,
         )
         if refused is not None:
-            log.warning("refused a WebSocket from %s: %s", ws.client, refused)
+            host = ws.client.host if ws.client else "?"
+            limit.warning(f"refused {host}", "refused a WebSocket from %s: %s", host, refused)
             await close(ws, 1008, refused)  # before accept: the client sees HTTP 403
             return
         if len(pages) >= MAX_PAGES:
@@ -212,7 +215,8 @@ def create_app(link: RobotLink, jog: JogController, config: WebConfig) -> Starle
             try:
                 msg = parse_message(data if data is not None else message.get("bytes"))
             except Violation as exc:
-                log.warning("closed a page's WebSocket (%s): %s", page.ws.client, exc.reason)
+                host = page.ws.client.host if page.ws.client else "?"
+                limit.warning(f"closed {host}", "closed a WebSocket of %s: %s", host, exc.reason)
                 await close(page.ws, exc.code, exc.reason)
                 return
             await handle(page, msg)
@@ -271,7 +275,7 @@ def create_app(link: RobotLink, jog: JogController, config: WebConfig) -> Starle
             if kind == "write":
                 refused = write_refusal(name, allow_motion=config.allow_motion_writes)
                 if refused is not None:
-                    log.warning("refused a page's write of %s: %s", name, refused)
+                    limit.warning("write", "refused a page's write of %s: %s", name, refused)
                     reply(page, {"t": "result", "id": rid, "name": name, "error": refused})
                     return
                 if not isinstance(value, str) or len(value) > MAX_VALUE:
