@@ -105,6 +105,8 @@ def test_a_page_message_parses() -> None:
         "t": "jog", "press": 3, "ov": 50.5, "step": None, "x": [[[1]]], "y": -1e308,
     }  # fmt: skip
     assert MAX_DEPTH == 4 and parse_message('{"a": [[[1]]]}') == {"a": [[[1]]]}
+    many = '{"a": [1], "b": [2], "c": {"d": [3]}, "e": "[[[[[["}'  # many brackets, depth 3
+    assert parse_message(many) == {"a": [1], "b": [2], "c": {"d": [3]}, "e": "[[[[[["}
 
 
 @pytest.mark.parametrize(
