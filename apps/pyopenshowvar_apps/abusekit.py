@@ -3,8 +3,8 @@
 
 * :class:`AppProcess` — ``kvp ARGS...`` in a subprocess, started once its first line says where
   it serves; its stderr goes to a file, so the tracebacks it printed can be counted;
-* :class:`PeakMemory` — a thread sampling a process' resident memory every few ms, so a suite
-  sees the peak *during* an attack, not what is left once the attackers have gone;
+* :class:`PeakMemory` — a process' peak resident memory *during* an attack (the kernel's
+  high-water mark), not what is left once the attackers have gone;
 * :class:`ChildProbe` / :func:`run_child_probe` — a bystander in a process of its own, so the
   attackers' event loop (and GIL) does not slow it down;
 * :class:`AttackTally` — what the attackers did and saw, their own failures included.
@@ -20,7 +20,6 @@ import os
 import subprocess
 import sys
 import tempfile
-import threading
 from collections.abc import Callable, Coroutine
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -50,27 +49,27 @@ class AttackTally(AbuseTally):
             self.notes.append(what)
 
 
+def _status_mb(pid: int, key: str) -> float:
+    """A ``/proc/PID/status`` size in MB (``VmRSS``, ``VmHWM``)."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith(key + ":"):
+            return int(line.split()[1]) * 1024 / 1e6
+    raise RuntimeError(f"no {key} for {pid}")
+
+
 class PeakMemory:
-    """``with PeakMemory(process.rss_mb) as mem: ...``; then ``mem.peak`` (MB) of what was
-    sampled every ``period`` seconds, and ``mem.start``."""
+    """``with PeakMemory(pid) as mem: ...``; then ``mem.peak``: the highest resident memory
+    (MB) of process ``pid`` while the block ran, and ``mem.start``, what it had at the start.
+    The kernel keeps the high-water mark (``VmHWM``, reset on entry through ``clear_refs``),
+    so no peak between two samples is missed (Linux)."""
 
-    def __init__(self, rss_mb: Callable[[], float], period: float = 0.01) -> None:
-        self.rss_mb, self.period = rss_mb, period
-        self.start = self.peak = rss_mb()
-        self.samples = 0
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="peak-rss", daemon=True)
-
-    def _run(self) -> None:
-        while not self._stop.wait(self.period):
-            try:
-                self.peak = max(self.peak, self.rss_mb())
-            except (OSError, RuntimeError):
-                return  # the process is gone: the suite sees that on its own
-            self.samples += 1
+    def __init__(self, pid: int) -> None:
+        self.pid = pid
+        self.start = self.peak = 0.0
 
     def __enter__(self) -> Self:
-        self._thread.start()
+        Path(f"/proc/{self.pid}/clear_refs").write_text("5")  # a new high-water mark
+        self.start = _status_mb(self.pid, "VmRSS")
         return self
 
     def __exit__(
@@ -79,8 +78,7 @@ class PeakMemory:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        self._stop.set()
-        self._thread.join(5.0)
+        self.peak = _status_mb(self.pid, "VmHWM")
 
 
 class AppProcess(EmulatorProcess):

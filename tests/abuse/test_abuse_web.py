@@ -187,7 +187,7 @@ def test_every_attack_at_once_with_a_bystander(rig: Rig) -> None:
             await asyncio.sleep(WARM + BASELINE)  # a warm-up, then the baseline
             q0 = await kvp.read_joint_angles()
             tallies = {name: AttackTally() for name in ATTACKS}
-            with PeakMemory(web.rss_mb) as memory:
+            with PeakMemory(web.pid) as memory:
                 attack_start = time.monotonic()
                 tasks = [asyncio.create_task(attack(web, tallies[name]))
                          for name, attack in ATTACKS.items()]  # fmt: skip
@@ -224,7 +224,7 @@ def test_every_attack_at_once_with_a_bystander(rig: Rig) -> None:
         f"page load p50 {b50 * 1e3:.1f} -> {d50 * 1e3:.1f} ms, max {d_max * 1e3:.0f} ms"
         f" ({len(base)} -> {len(during)} loads); live-state gap {b_gap * 1e3:.0f} ->"
         f" {d_gap * 1e3:.0f} ms; peak RSS {memory.start:.0f} -> {memory.peak:.0f} MB"
-        f" ({memory.samples} samples); "
+        f"; "
         + ", ".join(
             f"{n}: {t.requests} sent, {t.closed_by_server} closed" for n, t in tallies.items()
         )
@@ -238,7 +238,7 @@ def test_every_attack_at_once_with_a_bystander(rig: Rig) -> None:
     assert d50 <= max(10 * b50, b50 + 0.5)
     assert d_max <= max(1.0, 10 * b_max)
     assert d_gap <= max(10 * b_gap, b_gap + 0.5)
-    assert memory.samples > 100 and memory.peak - memory.start <= PEAK_GROWTH_MB
+    assert memory.peak - memory.start <= PEAK_GROWTH_MB
     # The rogue pages' writes never landed: the only jogs were the vanishing pages' presses at
     # 1 % jog override, each with the server's own increment and deadline; all stopped.
     assert len(commands) > 20 and idle  # nothing more is planned
