@@ -96,8 +96,9 @@ class Session:
         assert result.errors == 0 and result.wrong == 0, result.notes
         assert result.requests > 100, result
         # against the baseline of this very run (the abusers share the machine's two cores
-        # with the emulator): a bounded factor, or some tens of ms more; a stall is far beyond
-        assert result.p99_ms <= max(5 * base.p99_ms, base.p99_ms + 40.0), (base, result)
+        # with the emulator, which serves them too): a bounded factor, or up to 100 ms more,
+        # where an unbounded piece of work per event-loop turn stalls it for seconds
+        assert result.p99_ms <= max(10 * base.p99_ms, base.p99_ms + 100.0), (base, result)
         # (the slowest single round trip is one scheduler hiccup away on a shared machine:
         # it only has to stay far from a stall)
         assert result.max_ms <= max(10 * base.max_ms, base.max_ms + 500.0), (base, result)
