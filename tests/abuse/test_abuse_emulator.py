@@ -94,7 +94,7 @@ class Session:
         assert self.emu.alive()
         assert base.errors == 0 and base.wrong == 0 and base.requests > 20, base
         assert result.errors == 0 and result.wrong == 0, result.notes
-        assert result.requests > 100, result
+        assert result.requests >= 0.2 * base.requests * SECONDS / BASELINE_S, (base, result)
         # against the baseline of this very run (the abusers share the machine's two cores
         # with the emulator, which serves them too): a bounded factor, or up to 100 ms more,
         # where an unbounded piece of work per event-loop turn stalls it for seconds
@@ -173,7 +173,9 @@ def test_runaway_krl(tmp_path: Path) -> None:
     dat = tmp_path / "abuse.dat"
     dat.write_text(CONFIG)
     for session in _session("--config", str(dat), "--program", str(src)):
-        base, result, tally, growth = session.abuse([])  # the robot program is the abuser
+        # the robot program is the abuser and runs all along, the baseline included: this
+        # checks that serving stays steady beside it (bounded memory, no wrong value)
+        base, result, tally, growth = session.abuse([])
         session.check(base, result, tally, growth)
         emu = session.emu
         assert _read(emu.host, emu.port, "$PRO_STATE1") == "#P_ACTIVE"  # still running
