@@ -83,7 +83,7 @@ async def _forever(tally: AttackTally, one: Callable[[], Coroutine[Any, Any, boo
         except (OSError, TimeoutError, WebSocketException) as exc:
             tally.error(f"{type(exc).__name__}: {exc}")
         tally.requests += 1
-        await asyncio.sleep(0.05)
+        await asyncio.sleep(0.1)  # one attack after the other, without a pause of its own
 
 
 async def crafted_messages(web: WebProcess, tally: AttackTally) -> None:
@@ -110,7 +110,7 @@ async def rogue_pages(web: WebProcess, tally: AttackTally) -> None:
 
 async def vanishing_pages(web: WebProcess, tally: AttackTally) -> None:
     async def one() -> bool:
-        connected = await closing_pages(web.ws_url, 8, seed=tally.requests, source="127.0.0.5")
+        connected = await closing_pages(web.ws_url, 6, seed=tally.requests, source="127.0.0.5")
         tally.connections += connected
         return connected > 0
 
@@ -141,7 +141,7 @@ async def flood(web: WebProcess, tally: AttackTally) -> None:
 
 
 async def slow_heads(web: WebProcess, tally: AttackTally) -> None:
-    await slowloris("127.0.0.1", web.port, tally, sockets=80, interval=0.5, source="127.0.0.2")
+    await slowloris("127.0.0.1", web.port, tally, sockets=80, interval=2.0, source="127.0.0.2")
 
 
 ATTACKS: dict[str, Attack] = {
