@@ -38,7 +38,7 @@ from starlette.datastructures import MutableHeaders
 from starlette.middleware import Middleware
 from starlette.middleware.trustedhost import TrustedHostMiddleware
 from starlette.requests import Request
-from starlette.responses import FileResponse, Response
+from starlette.responses import Response
 from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
@@ -137,8 +137,10 @@ def create_app(link: RobotLink, jog: JogController, config: WebConfig) -> Starle
             names.update(page.watch)
         link.watch = set(sorted(names)[:MAX_WATCH])
 
+    page = (STATIC / "index.html").read_bytes()  # small: served from memory, no file thread
+
     async def index(request: Request) -> Response:
-        return FileResponse(STATIC / "index.html")
+        return Response(page, media_type="text/html")
 
     async def close(ws: WebSocket, code: int, reason: str) -> None:
         with contextlib.suppress(*_CLOSED):
