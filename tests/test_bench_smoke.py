@@ -30,6 +30,7 @@ BENCH = Path(__file__).resolve().parents[1] / "bench"
         ("latency_pacing.py", "paced"),
         ("motion_kss.py", "A2 reversal"),
         ("web_jog.py", "jog stop latency after release"),
+        ("app_abuse.py", "rogue page: A1 travel after the page closed"),
         ("c3.py", "upload-to-motion"),
         ("snapshot.py", "20 variables: `read_snapshot`"),
         ("snapshot_cpu.py", "CPU at rest, README's snapshot"),

@@ -96,3 +96,58 @@ async def test_garbage_on_the_modbus_port_does_not_stop_the_plc() -> None:
             client.close()
         await asyncio.sleep(0.05)
         assert state.cycle >= cycle and sim.plc.cycle > cycle  # still serving, still scanning
+
+
+async def test_watchdog_and_undefined_coils_are_not_any_clients_to_change() -> None:
+    """WATCHDOG = 0 (or longer than the start-up value) and coils the map does not define are
+    refused; only a start-up option switches the watchdog off."""
+    async with PlatformSimulator(PlatformConfig(port=0, accel=False)) as sim:
+        client = AsyncModbusTcpClient("127.0.0.1", port=sim.port, timeout=2, retries=0)
+        assert await client.connect()
+        try:
+            wd = reg.HOLDING["WATCHDOG"]
+            assert (await client.write_register(wd, 0)).exception_code == 3
+            assert (await client.write_register(wd, 1001)).exception_code == 3
+            assert not (await client.write_register(wd, 400)).isError()
+            assert sim.plc.watchdog == 0.4
+            assert (await client.write_register(wd, 1000)).isError() is False
+            for address in (3, 5, 15, 100):
+                assert (await client.write_coil(address, True)).exception_code == 2
+            assert (await client.write_coils(0, [False] * 4)).exception_code == 2
+            assert (await client.write_coils(2, [False, True])).exception_code == 2
+            assert not (await client.write_coils(0, [False, False, False])).isError()
+            assert (await client.read_coils(0, count=8)).bits[:8] == [False] * 8
+        finally:
+            client.close()
+        assert sim.plc.watchdog == 1.0 and sim.refused == 7  # coil 100: pymodbus refuses it
+    async with PlatformSimulator(PlatformConfig(port=0, accel=False, watchdog=0)) as sim:
+        async with PlatformClient("127.0.0.1", sim.port, timeout=2.0) as plc:
+            await plc.configure(watchdog=0.0)  # started off: the master may keep it off
+            await plc.configure(watchdog=2.0)  # or switch it on
+        assert sim.plc.watchdog == 2.0
+
+
+async def test_silent_master_stops_the_waves_over_modbus() -> None:
+    """A master switches the PLC's waves on, feeds the watchdog, then goes silent: the drives
+    stop one watchdog period after its last write (in the PLC's own clock)."""
+    async with PlatformSimulator(PlatformConfig(port=0, accel=False)) as sim:
+        stops: list[tuple[float, float]] = []  # (PLC time of the fault, of the last write)
+
+        def watch(s: PlatformSimulator) -> None:
+            if s.plc.fault and not stops:
+                stops.append((s.plc.time, s.plc.last_master))
+
+        sim.on_scan.append(watch)
+        async with PlatformClient("127.0.0.1", sim.port, timeout=2.0) as master:
+            await master.configure(watchdog=0.5)
+            await master.enable(True)
+            await master.wave(True)
+            for _ in range(5):
+                await master.heartbeat()
+                await asyncio.sleep(0.1)
+        async with asyncio.timeout(5):
+            while not stops or sim.plc.status & 1 << reg.STATUS["moving"]:  # noqa: ASYNC110
+                await asyncio.sleep(0.02)
+        fault_at, last_write = stops[0]
+        assert 0.5 < fault_at - last_write <= 0.5 + 0.06  # a scan may take up to 50 ms
+        assert not sim.plc.enabled and sim.plc.wave_on  # the waves are still "on"

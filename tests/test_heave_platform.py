@@ -140,6 +140,50 @@ def test_plc_watchdog_stops_the_drives() -> None:
     assert plc.enabled
 
 
+def test_plc_watchdog_stops_the_plcs_own_waves_too() -> None:
+    """The watchdog holds in every mode: waves running with nobody writing stop ~1 s after the
+    last master write (it once skipped the check while WAVE was on)."""
+    plc = PlatformPLC(watchdog=1.0)
+    plc.set_enable(True)
+    plc.set_wave(True)
+    dt = 0.01
+    while plc.time < 0.99:  # the last master write was the enable at t = 0
+        plc.step(dt)
+    assert plc.enabled and plc.fault == 0 and plc.wave_on
+    assert np.any(np.abs(plc.beta_dot) > 0.1)  # the waves drive it
+    plc.step(dt)
+    plc.step(dt)
+    assert not plc.enabled and plc.fault == 1  # at 1.0 s + one scan
+    fault_speed = float(np.abs(plc.beta_dot).max())
+    for _ in range(math.ceil(fault_speed / plc.motors.accel / dt) + 1):
+        plc.step(dt)  # braking at the motors' acceleration limit
+    assert np.all(plc.beta_dot == 0.0)
+    beta = plc.beta.copy()
+    for _ in range(200):  # and it stays put with the waves still "on"
+        plc.step(dt)
+    assert np.array_equal(plc.beta, beta)
+
+
+def test_plc_watchdog_register_cannot_switch_it_off() -> None:
+    words = PlatformPLC(watchdog=1.0).command_words()
+    plc = PlatformPLC(watchdog=1.0)
+    i = 7  # WATCHDOG
+
+    def block(ms: int) -> list[int]:
+        return [*words[:i], ms, *words[i + 1 :]]
+
+    assert plc.check_commands(block(1000)) is None  # the start-up value
+    assert plc.check_commands(block(1)) is None  # shorter: fine
+    assert "WATCHDOG = 0 ms: 1…1000" in str(plc.check_commands(block(0)))
+    assert "WATCHDOG = 1001 ms" in str(plc.check_commands(block(1001)))
+    assert plc.check_commands(block(60001)) is not None  # the register range itself
+    off = PlatformPLC(watchdog=0.0)  # off by the start-up option: the master may set any
+    assert off.check_commands(block(0)) is None and off.check_commands(block(60000)) is None
+    assert off.check_commands(block(60001)) is not None
+    short = PlatformPLC(watchdog=0.25)
+    assert short.check_commands(block(250)) is None and short.check_commands(block(251))
+
+
 def test_accelerometer_angles_match_the_pose() -> None:
     board = AccelFirmware(noise=0.0)
     roll, pitch = board.sample(PlatformPose(0.0, 3.0, -2.0))

@@ -323,20 +323,61 @@ async def _true(value: bool) -> bool:
 async def test_live_state_watch_list_and_writes(rig: tuple[Emulator, WebServer]) -> None:
     _, web = rig
     ws = await page(web)
-    await ws.send(json.dumps({"t": "watch", "names": ["$OV_PRO", "NOPE_VAR"]}))
-    await ws.send(json.dumps({"t": "write", "id": 7, "name": "$OV_PRO", "value": "55"}))
+    await ws.send(json.dumps({"t": "watch", "names": ["MYINT", "NOPE_VAR"]}))
+    await ws.send(json.dumps({"t": "write", "id": 7, "name": "MYINT", "value": "55"}))
     seen: dict[str, Any] = {}
     async with asyncio.timeout(5):
-        while "NOPE_VAR" not in seen or seen.get("$OV_PRO", {}).get("text") != "55":
+        while "NOPE_VAR" not in seen or seen.get("MYINT", {}).get("text") != "55":
             msg = json.loads(await ws.recv())
             if msg["t"] == "state":
                 assert len(msg["axes"]) == 6 and len(msg["arm"]) == 8
                 assert msg["program"]["name"] == "KVP_JOG" and msg["program"]["jog_ready"] is None
                 seen.update(msg["watch"])
             elif msg["t"] == "result":
-                assert msg == {"t": "result", "id": 7, "name": "$OV_PRO", "text": "55"}
+                assert msg == {"t": "result", "id": 7, "name": "MYINT", "text": "55"}
     assert seen["NOPE_VAR"]["error"]
     await ws.close()
+
+
+async def ask(ws: ClientConnection, msg: dict[str, Any]) -> dict[str, Any]:
+    """Send one request and return its answer (a result, an error or a refusal)."""
+    await ws.send(json.dumps(msg))
+    async with asyncio.timeout(5):
+        while True:
+            answer = json.loads(await ws.recv())
+            if answer.get("t") in ("result", "error", "refused"):
+                return dict(answer)
+
+
+async def test_watch_list_writes_get_kvp_writes_checks() -> None:
+    """The same checks as `kvp write`: the literal before sending, the likely reason of a
+    refusal after; motion variables only with --allow-motion-writes."""
+    async with Emulator(jog_config()) as emu, Client("127.0.0.1", emu.port) as kvp:
+        for allow in (False, True):
+            async with WebServer(
+                "127.0.0.1", emu.port, token=TOKEN, emulated=True, allow_motion_writes=allow
+            ) as web:
+                ws = await page(web)
+                answer = await ask(ws, {"t": "write", "id": 1, "name": "MYINT", "value": "{A1 2"})
+                assert answer["t"] == "error" and "not a KRL literal" in answer["message"]
+                answer = await ask(ws, {"t": "write", "id": 2, "name": "MYINT", "value": "1.5"})
+                assert answer["id"] == 2 and answer["error"].startswith("write refused: 'MYINT'")
+                assert "wrong type: the variable is INT" in answer["error"]
+                answer = await ask(ws, {"t": "write", "id": 3, "name": "$OV_PRO", "value": "40"})
+                if allow:
+                    assert answer == {"t": "result", "id": 3, "name": "$OV_PRO", "text": "40"}
+                    assert await kvp.read("$OV_PRO") == "40"
+                else:
+                    assert answer["error"] == (
+                        "writing $OV_PRO can move the robot or change how it moves: refused"
+                        " unless kvp web runs with --allow-motion-writes"
+                    )
+                    assert await kvp.read("$OV_PRO") == "100"
+                answer = await ask(ws, {"t": "write", "id": 4, "name": "JOG_MODE", "value": "1"})
+                assert answer["error"] == (
+                    "JOG_MODE belongs to the jog program: only the server's jog logic writes it"
+                )
+                await ws.close()
 
 
 # --- security and abuse ---------------------------------------------------------------------
@@ -357,7 +398,7 @@ async def test_abuse_is_bounded(rig: tuple[Emulator, WebServer]) -> None:
     _, web = rig
     ws = await page(web)
     await ws.send(json.dumps({"t": "read", "id": 1, "name": "x" * 500}))
-    await ws.send("not json")
+    await ws.send(json.dumps({"t": "nope"}))  # a JSON object a page does not send: an error
     await ws.send(json.dumps({"t": "jog", "press": 1, "frame": "axis", "key": "Q9", "dir": 1}))
     errors = 0
     async with asyncio.timeout(5):

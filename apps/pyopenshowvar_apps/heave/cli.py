@@ -242,7 +242,14 @@ def platform(
     motor_speed: Annotated[float, typer.Option(help="Joint speed limit (deg/s).")] = 90.0,
     motor_accel: Annotated[float, typer.Option(help="Joint acceleration limit (deg/s²).")] = 360.0,
     accel_noise: Annotated[float, typer.Option(help="Accelerometer noise (g, 1 σ).")] = 0.005,
-    watchdog: Annotated[float, typer.Option(help="Master watchdog (s, 0 = off).")] = 1.0,
+    watchdog: Annotated[
+        float,
+        typer.Option(
+            help="Master watchdog (s): the drives stop this long after the last master write,"
+            " in every mode. 0 = off; only this option switches it off (the WATCHDOG register"
+            " may shorten it only)."
+        ),
+    ] = 1.0,
 ) -> None:
     """Run the wave-platform simulator (PLC on Modbus TCP + accelerometer serial stream)."""
     from pyopenshowvar_apps.common import EXIT_CONNECTION, EXIT_USAGE, fail
@@ -262,6 +269,11 @@ def platform(
         async with PlatformSimulator(config) as sim:
             typer.echo(f"platform PLC on modbus://{sim.host}:{sim.port}", err=False)
             typer.echo(f"accelerometer on {sim.accel_path}", err=False)
+            if wave and watchdog > 0:
+                typer.echo(
+                    f"waves on: they stop {watchdog:g} s after the last master write (a master"
+                    " writes HEARTBEAT, or start with --watchdog 0 to run without one)"
+                )
             await asyncio.Event().wait()
 
     try:

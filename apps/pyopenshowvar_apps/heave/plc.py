@@ -62,7 +62,10 @@ class PlatformPLC:
         self.joint_mode = False
         self.sp_pose = PlatformPose()
         self.sp_beta: FloatArray = neutral.copy()
+        #: The master watchdog (s, 0 = off); the register may shorten it, never lengthen or
+        #: switch it off: that takes this start-up value (``kvp platform --watchdog 0``).
         self.watchdog = watchdog
+        self.watchdog_limit = watchdog
         self.speed_pct = 100
         self.fault = reg.FAULT_NONE
         self.saturated = False
@@ -75,6 +78,11 @@ class PlatformPLC:
     def master_alive(self) -> None:
         """A write from the master arrived: feed the watchdog."""
         self._last_master = self.time
+
+    @property
+    def last_master(self) -> float:
+        """PLC time of the last master write (what the watchdog counts from)."""
+        return self._last_master
 
     def set_enable(self, on: bool) -> None:
         if on and self.fault != reg.FAULT_NONE:
@@ -101,12 +109,9 @@ class PlatformPLC:
         """Advance the PLC by ``dt`` seconds: watchdog, set-point, motors, state."""
         self.time += dt
         self.cycle = (self.cycle + 1) & 0xFFFF
-        if (
-            self.enabled
-            and not self.wave_on
-            and self.watchdog > 0
-            and self.time - self._last_master > self.watchdog
-        ):
+        # In every mode, the PLC's own waves included: drives that run on with nobody there
+        # to stop them are what the watchdog exists to prevent.
+        if self.enabled and self.watchdog > 0 and self.time - self._last_master > self.watchdog:
             self.fault = reg.FAULT_WATCHDOG
             self.enabled = False
         if self.enabled:
@@ -224,9 +229,22 @@ class PlatformPLC:
         self.wave_seed = signed[9]
         self.master_alive()
 
+    def check_commands(self, words: list[int]) -> str | None:
+        """Why a holding block is refused (None when it may be applied): the register ranges
+        and the watchdog, which a write may shorten (down to 1 ms) but not lengthen beyond the
+        start-up value nor switch off, unless it was started off."""
+        why = validate_commands(words)
+        if why is not None:
+            return why
+        ms = words[reg.HOLDING["WATCHDOG"]]
+        limit = round(self.watchdog_limit * 1000.0)
+        if limit > 0 and not 1 <= ms <= limit:
+            return f"WATCHDOG = {ms} ms: 1…{limit} (off or longer only by a start-up option)"
+        return None
+
 
 def validate_commands(words: list[int]) -> str | None:
-    """Why a holding block is refused (None when every register is in range)."""
+    """Why a holding block is refused by the register ranges alone (None: all in range)."""
     for i, word in enumerate(words):
         lo, hi = reg.HOLDING_LIMITS[i]
         value = word if i in reg.UNSIGNED else int(reg.from_register(word))

@@ -12,6 +12,8 @@ Coils (read 0x01, write 0x05/0x0F):
 2    RESET        write 1 to acknowledge a fault (reads back 0)
 ===  ===========  ==================================================================
 
+A write of any other coil is refused with exception 2 (ILLEGAL DATA ADDRESS).
+
 Holding registers (read 0x03, write 0x06/0x10), the commands:
 
 ===  ===========  ===========  =======================================================
@@ -20,8 +22,10 @@ Holding registers (read 0x03, write 0x06/0x10), the commands:
 2    SP_PITCH     0.001°       pitch set-point, −20000…20000
 3    MODE         –            0: pose set-points (the PLC solves eq. 4.6), 1: joint set-points
 4–6  SP_BETA1..3  0.01°        joint set-points for MODE 1, 0…12500
-7    WATCHDOG     ms           a master write must arrive this often while enabled
-                               (0: off; default 1000); else fault 1 and the drives stop
+7    WATCHDOG     ms           a master write must arrive this often while enabled, in
+                               every mode; else fault 1 and the drives stop. 1…the
+                               start-up value (default 1000): a write may shorten it,
+                               never switch it off (0 only when started off)
 8    SPEED        %            motor speed override, 1…100
 9    WAVE_SEED    –            seed of the PLC's wave generator (0…65535)
 10   HEARTBEAT    –            any value; a write feeds the watchdog

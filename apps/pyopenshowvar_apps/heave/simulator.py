@@ -27,7 +27,7 @@ from kukavarproxy_emu.loopthread import LoopThread
 from . import registers as reg
 from .accel import AccelFirmware, format_line
 from .geometry import THESIS_PLATFORM, PlatformGeometry, PlatformPose
-from .plc import MotorLimits, PlatformPLC, validate_commands
+from .plc import MotorLimits, PlatformPLC
 
 __all__ = ["PlatformConfig", "PlatformSimulator", "PlatformThread"]
 
@@ -242,6 +242,11 @@ class PlatformSimulator:
         self.requests += 1
         plc = self.plc
         if function_code in (1, 5, 15):  # coils, bit-packed: registers[0] holds coils 0..15
+            # Only the coils of the map may be written (pymodbus gives a bit block's count in
+            # 16-bit words, so a write's own length is the one to check; reads of 3..15 give 0).
+            if values is not None and address + len(values) > len(reg.COILS):
+                self.refused += 1
+                return ExcCodes.ILLEGAL_ADDRESS
             if values is not None:
                 for i, on in enumerate(values):
                     self._coil(address + i, bool(on))
@@ -268,7 +273,7 @@ class PlatformSimulator:
         if values is not None:
             for i, value in enumerate(values):
                 words[address + i] = int(value) & 0xFFFF
-            why = validate_commands(words)
+            why = plc.check_commands(words)
             if why is not None:
                 self.refused += 1
                 log.info("refused Modbus write: %s", why)

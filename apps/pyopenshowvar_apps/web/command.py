@@ -41,6 +41,15 @@ def web(
         ),
     ] = None,
     hz: Annotated[float, typer.Option("--hz", help="Live updates per second.")] = 20.0,
+    allow_motion_writes: Annotated[
+        bool,
+        typer.Option(
+            "--allow-motion-writes",
+            help="Let the watch list write variables that can move the robot or change how it"
+            " moves ($OV_PRO, $ system variables, the CLI's motion variables). Off by default;"
+            " the jog program's own variables are never writable from a page.",
+        ),
+    ] = False,
     krl_dir: Annotated[
         Path | None,
         typer.Option(
@@ -87,6 +96,7 @@ def web(
                 hz=hz,
                 timeout=Opts.timeout,
                 emulated=Opts.emulator is not None,
+                allow_motion_writes=allow_motion_writes,
             )
         except OSError as exc:
             fail(EXIT_USAGE, f"cannot serve on {bind}:{http_port}: {exc.strerror or exc}")
@@ -96,6 +106,8 @@ def web(
             typer.echo(
                 f"robot: KVP {Opts.where()}" + (" (embedded emulator)" if Opts.emulator else "")
             )
+            if allow_motion_writes:
+                typer.echo("the watch list may write variables that move the robot")
             if token is not None:
                 typer.echo(f"token: {token}")
             typer.echo(f"open {server.page_url(host)}")

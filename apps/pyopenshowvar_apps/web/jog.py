@@ -10,6 +10,7 @@ into KVP traffic on its own connection:
 * while held, every :data:`TOPUP` s: read ``JOG_COUNT`` and move ``JOG_UNTIL`` to
   :data:`~.jogplan.CREDIT` increments ahead of it, but never past what the software limits
   (axes) or the reachable workspace (Cartesian) allow, nor past the end of a step;
+* a keep-alive may change the jog override only (anything else stops the jog);
 * release, a dropped WebSocket, :data:`HOLD_TIMEOUT` without a keep-alive, or a failed write:
   the increment zeroed first, then ``JOG_UNTIL = 0`` and ``JOG_MODE = 0``, pipelined.
 
@@ -23,7 +24,7 @@ import asyncio
 import logging
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -129,6 +130,11 @@ class JogController:
             if jog.owner is not owner:
                 return "another page is jogging"
             if jog.press == press:
+                if replace(req, override=jog.req.override) != jog.req:
+                    # Only the override may change while a button is held: a keep-alive that
+                    # names another axis, direction or step is not the page's button.
+                    await self.stop(owner, "the press changed its button")
+                    return "a held press cannot change its button: press again"
                 jog.last_hold = now
                 if req.override != jog.req.override and req.step is None:
                     await self._retune(jog, req)

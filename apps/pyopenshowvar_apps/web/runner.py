@@ -19,6 +19,7 @@ import uvicorn
 from pyopenshowvar import Client
 from pyopenshowvar.kinematics import KR6R900SIXX, RobotModel
 
+from .httpguard import HEAD_TIMEOUT, TOTAL, ConnectionGuard, guarded_protocols
 from .jog import JogController
 from .link import RobotLink
 from .server import MAX_MESSAGE, WebConfig, create_app
@@ -65,6 +66,7 @@ class WebServer:
         hz: float = 20.0,
         timeout: float = 2.0,
         emulated: bool = False,
+        allow_motion_writes: bool = False,
         model: RobotModel = KR6R900SIXX,
     ) -> None:
         self.bind = bind
@@ -73,7 +75,9 @@ class WebServer:
         self.control = Client(kvp_host, kvp_port, timeout=timeout, auto_reconnect=True,
                               keepalive=None)  # fmt: skip
         self.jog = JogController(self.control, self.link, model=model)
-        self.config = WebConfig(token=token, emulated=emulated)
+        self.config = WebConfig(
+            token=token, emulated=emulated, allow_motion_writes=allow_motion_writes
+        )
         self.app = create_app(self.link, self.jog, self.config)
         family = socket.AF_INET6 if ":" in bind else socket.AF_INET
         self.sock = socket.socket(family, socket.SOCK_STREAM)
@@ -84,6 +88,7 @@ class WebServer:
             self.sock.close()
             raise
         self.port: int = self.sock.getsockname()[1]
+        self.guard = ConnectionGuard()
         self._tasks: list[asyncio.Task[None]] = []
         self._server: uvicorn.Server | None = None
 
@@ -98,15 +103,18 @@ class WebServer:
         return base + (f"#token={self.config.token}" if self.config.token else "")
 
     async def __aenter__(self) -> WebServer:
+        http, ws = guarded_protocols(self.guard)  # slow and greedy clients (httpguard)
         config = uvicorn.Config(
             self.app,
             log_level="warning",
             access_log=False,  # the token travels in the WebSocket's query string
             lifespan="off",
-            ws="websockets-sansio",
+            http=http,
+            ws=ws,
             ws_max_size=MAX_MESSAGE,
             ws_per_message_deflate=False,
-            limit_concurrency=64,
+            limit_concurrency=TOTAL,
+            timeout_keep_alive=int(HEAD_TIMEOUT),
         )
         self._server = uvicorn.Server(config)
         self.sock.listen(64)

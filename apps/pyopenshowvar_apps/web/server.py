@@ -4,24 +4,29 @@
 CDN), ``/ws`` the WebSocket. Every page gets the latest state ``hz`` times a second, and sends
 jog, watch-list, read and write commands as small JSON messages.
 
-Security: when a token is required (bound beyond loopback, or ``--token`` given) the
-WebSocket is refused (HTTP 403) without ``?token=``; since every read, write and jog goes
-through the WebSocket, nothing moves or is written without it. The Origin header must name
-this server, so a web page from elsewhere cannot drive the robot through a user's browser;
-without a token (loopback) the Host header must be a loopback name too (no DNS rebinding);
-and the page may not be framed (no click-jacking of the jog buttons).
+Security (the rules themselves are :mod:`.policy`): when a token is required (bound beyond
+loopback, or ``--token`` given) the WebSocket is refused (HTTP 403) without ``?token=``; since
+every read, write and jog goes through the WebSocket, nothing moves or is written without it.
+The Origin header must name this server, so a web page from elsewhere cannot drive the robot
+through a user's browser; without a token (loopback) the Host header must be a loopback name
+too (no DNS rebinding); and the page may not be framed (no click-jacking of the jog buttons).
+A page never writes the jog program's variables, and writes nothing that can move the robot
+unless the server runs with ``--allow-motion-writes``; its other writes get ``kvp write``'s
+checks.
 
 Abuse is bounded per connection: a message is at most :data:`MAX_MESSAGE` bytes (the
-WebSocket layer refuses larger ones), at most :data:`RATE` messages a second (a burst of
-:data:`BURST`), one KVP read or write outstanding, :data:`MAX_WATCH_PER_PAGE` watched names;
-a page that reads slower than the stream is sent only the newest state (nothing queues up),
-and at most :data:`MAX_PAGES` pages connect at once.
+WebSocket layer refuses larger ones) of strict JSON (anything else closes the connection with
+a reason), at most :data:`~.policy.RATE` messages a second (a burst of :data:`~.policy.BURST`),
+one KVP read or write outstanding, :data:`MAX_WATCH_PER_PAGE` watched names; a page that reads
+slower than the stream is sent only the newest state (nothing queues up), at most
+:data:`MAX_PAGES` pages connect at once, and a page going away is never an error. The HTTP
+side (slow or too many connections) is guarded in :mod:`.httpguard`.
 """
 
 from __future__ import annotations
 
 import asyncio
-import hmac
+import contextlib
 import json
 import logging
 import time
@@ -33,17 +38,29 @@ from starlette.datastructures import MutableHeaders
 from starlette.middleware import Middleware
 from starlette.middleware.trustedhost import TrustedHostMiddleware
 from starlette.requests import Request
-from starlette.responses import FileResponse, Response
+from starlette.responses import Response
 from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
-from starlette.websockets import WebSocket, WebSocketDisconnect
+from starlette.websockets import WebSocket, WebSocketDisconnect, WebSocketDisconnected
 
 from pyopenshowvar import KvpError
+from pyopenshowvar_apps.writecheck import check_literal, checked_write
 
+from .httpguard import LogLimit
 from .jog import JogController
-from .jogplan import AXIS_SPEED, CADENCE, CART_SPEED, STEP_SIZES, JogRequest
+from .jogplan import AXIS_SPEED, CADENCE, CART_SPEED, STEP_SIZES
 from .link import MAX_WATCH, RobotLink
+from .policy import (
+    RESTART_VARIABLE,
+    TokenBucket,
+    Violation,
+    jog_request,
+    parse_message,
+    refuse_connection,
+    variable_name,
+    write_refusal,
+)
 
 __all__ = ["MAX_MESSAGE", "MAX_PAGES", "WebConfig", "create_app"]
 
@@ -52,10 +69,7 @@ log = logging.getLogger(__name__)
 STATIC = Path(__file__).with_name("static")
 MAX_MESSAGE = 4096
 MAX_PAGES = 16
-RATE = 100.0
-BURST = 200.0
 MAX_WATCH_PER_PAGE = 16
-MAX_NAME = 64
 MAX_VALUE = 1024
 HEADERS = {
     "Content-Security-Policy": "default-src 'self'; connect-src 'self'; img-src 'self' data:; "
@@ -74,11 +88,15 @@ LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1", "[::1]")
 
 
 class WebConfig:
-    """What the server needs besides the robot: the token and a label for the page."""
+    """What the server needs besides the robot: the token, a label for the page, and whether
+    the watch list may write variables that move the robot (``--allow-motion-writes``)."""
 
-    def __init__(self, *, token: str | None, emulated: bool = False) -> None:
+    def __init__(
+        self, *, token: str | None, emulated: bool = False, allow_motion_writes: bool = False
+    ) -> None:
         self.token = token
         self.emulated = emulated
+        self.allow_motion_writes = allow_motion_writes
 
 
 class _Page:
@@ -89,25 +107,22 @@ class _Page:
         self.state: dict[str, Any] | None = None
         self.wake = asyncio.Event()
         self.watch: list[str] = []
-        self.tokens = BURST
-        self.stamp = time.monotonic()
+        self.bucket = TokenBucket(time.monotonic())
         self.busy = False
         self.outbox: list[dict[str, Any]] = []  # replies; at most one per outstanding request
 
-    def allow(self) -> bool:
-        now = time.monotonic()
-        self.tokens = min(BURST, self.tokens + (now - self.stamp) * RATE)
-        self.stamp = now
-        if self.tokens < 1.0:
-            return False
-        self.tokens -= 1.0
-        return True
+
+#: What using a page that has gone raises. A page going away is normal, never a traceback.
+_GONE = (WebSocketDisconnect, WebSocketDisconnected, OSError)
+#: ... and what sending to it raises once a close was sent (Starlette's RuntimeError).
+_CLOSED = (*_GONE, RuntimeError)
 
 
 def create_app(link: RobotLink, jog: JogController, config: WebConfig) -> Starlette:
     """The Starlette application (the caller runs it with uvicorn and runs ``link``/``jog``)."""
     pages: set[_Page] = set()
     tasks: set[asyncio.Task[None]] = set()  # KVP requests of the pages, referenced until done
+    limit = LogLimit(log)  # what pages do wrong is logged, but never floods the log
 
     def on_state(state: dict[str, Any]) -> None:
         for page in pages:
@@ -122,26 +137,23 @@ def create_app(link: RobotLink, jog: JogController, config: WebConfig) -> Starle
             names.update(page.watch)
         link.watch = set(sorted(names)[:MAX_WATCH])
 
-    async def index(request: Request) -> Response:
-        return FileResponse(STATIC / "index.html")
+    page = (STATIC / "index.html").read_bytes()  # small: served from memory, no file thread
 
-    def authorised(ws: WebSocket) -> str | None:
-        origin = ws.headers.get("origin")
-        host = ws.headers.get("host", "")
-        if origin is not None and origin not in (f"http://{host}", f"https://{host}"):
-            return "wrong origin"
-        if config.token is not None:
-            given = ws.query_params.get("token", "")
-            if not hmac.compare_digest(given.encode(), config.token.encode()):
-                return "token missing or wrong"
-        return None
+    async def index(request: Request) -> Response:
+        return Response(page, media_type="text/html")
+
+    async def close(ws: WebSocket, code: int, reason: str) -> None:
+        with contextlib.suppress(*_CLOSED):
+            await ws.close(code=code, reason=reason)
 
     async def sender(page: _Page) -> None:
         try:
             await send_loop(page)
+        except _CLOSED:
+            pass  # the page went away (or was closed); the receiving side cleans up
         except Exception:  # a bug here must not leave the page connected but silent
             log.exception("sending to a page failed")
-            await page.ws.close(code=1011)
+            await close(page.ws, 1011, "internal error")
 
     async def send_loop(page: _Page) -> None:
         while True:
@@ -159,41 +171,66 @@ def create_app(link: RobotLink, jog: JogController, config: WebConfig) -> Starle
                 await page.ws.send_text(json.dumps(out))
 
     async def stream(ws: WebSocket) -> None:
-        refused = authorised(ws)
+        refused = refuse_connection(
+            ws.headers.get("origin"),
+            ws.headers.get("host", ""),
+            ws.query_params.get("token"),
+            config.token,
+        )
         if refused is not None:
-            log.warning("refused a WebSocket from %s: %s", ws.client, refused)
-            await ws.close(code=1008)  # before accept: the client sees HTTP 403
+            host = ws.client.host if ws.client else "?"
+            limit.warning(f"refused {host}", "refused a WebSocket from %s: %s", host, refused)
+            await close(ws, 1008, refused)  # before accept: the client sees HTTP 403
             return
         if len(pages) >= MAX_PAGES:
-            await ws.close(code=1013)
+            await close(ws, 1013, "too many pages")
             return
-        await ws.accept()
         page = _Page(ws)
-        pages.add(page)
-        task = asyncio.create_task(sender(page))
-        await ws.send_text(json.dumps(hello()))
-        page.state = link.snapshot
-        page.wake.set()
         try:
-            while True:
-                text = await ws.receive_text()
-                if not page.allow():
-                    await ws.close(code=1008, reason="too many messages")
-                    break
-                await handle(page, text)
-        except WebSocketDisconnect:
+            await ws.accept()
+            pages.add(page)
+            page.state = link.snapshot
+            page.outbox.append(hello())
+            page.wake.set()
+            task = asyncio.create_task(sender(page))
+            try:
+                await receive_loop(page)
+            finally:
+                task.cancel()
+        except _GONE:
             pass
         finally:
             pages.discard(page)
-            task.cancel()
             await jog.release(page, "the page's connection was lost")
             jog.forget(page)
             watch_union()
+
+    async def receive_loop(page: _Page) -> None:
+        while True:
+            message = await page.ws.receive()
+            if message["type"] == "websocket.disconnect":
+                return
+            if not page.bucket.allow(time.monotonic()):
+                await close(page.ws, 1008, "too many messages")
+                return
+            data = message.get("text")
+            try:
+                msg = parse_message(data if data is not None else message.get("bytes"))
+            except Violation as exc:
+                host = page.ws.client.host if page.ws.client else "?"
+                limit.warning(f"closed {host}", "closed a WebSocket of %s: %s", host, exc.reason)
+                await close(page.ws, exc.code, exc.reason)
+                return
+            await handle(page, msg)
+            # Queued messages would be taken without a pause: one message per turn of the
+            # event loop keeps a flooding page from stalling the others (bounded work).
+            await asyncio.sleep(0)
 
     def hello() -> dict[str, Any]:
         return {
             "t": "hello",
             "emulated": config.emulated,
+            "motion_writes": config.allow_motion_writes,
             "axis_speed": AXIS_SPEED,
             "cart_speed": CART_SPEED,
             "steps": STEP_SIZES,
@@ -205,57 +242,67 @@ def create_app(link: RobotLink, jog: JogController, config: WebConfig) -> Starle
         page.outbox.append(message)
         page.wake.set()
 
-    async def handle(page: _Page, text: str) -> None:
+    async def handle(page: _Page, msg: dict[str, Any]) -> None:
         try:
-            msg = json.loads(text)
-            if not isinstance(msg, dict):
-                raise ValueError("a message is a JSON object")
             kind = msg.get("t")
             if kind == "jog":
-                req = JogRequest(
-                    frame=msg["frame"],
-                    key=str(msg["key"]),
-                    direction=int(msg["dir"]),
-                    step=float(msg["step"]) if msg.get("step") else None,
-                    override=float(msg.get("ov", 50)),
-                )
-                refused = await jog.press(page, int(msg["press"]), req)
+                press, req = jog_request(msg)
+                refused = await jog.press(page, press, req)
                 if refused is not None:
-                    reply(page, {"t": "refused", "press": msg["press"], "reason": refused})
+                    reply(page, {"t": "refused", "press": press, "reason": refused})
             elif kind == "release":
                 await jog.release(page, str(msg.get("why", "released"))[:40])
             elif kind == "watch":
-                names = [_name(n) for n in msg["names"]][:MAX_WATCH_PER_PAGE]
-                page.watch = names
+                names = msg.get("names")
+                if not isinstance(names, list) or len(names) > MAX_WATCH_PER_PAGE:
+                    raise ValueError(f"names: a list of at most {MAX_WATCH_PER_PAGE} names")
+                page.watch = [variable_name(n) for n in names]
                 watch_union()
             elif kind in ("read", "write", "restart"):
                 request(page, msg)
             else:
-                raise ValueError(f"unknown message type {kind!r}")
-        except (KeyError, TypeError, ValueError) as exc:
+                raise ValueError(f"unknown message type {str(kind)[:20]!r}")
+        except ValueError as exc:
             reply(page, {"t": "error", "message": str(exc)[:200]})
 
     def request(page: _Page, msg: dict[str, Any]) -> None:
-        if page.busy:
-            reply(page, {"t": "result", "id": msg.get("id"), "error": "busy: one at a time"})
-            return
-        kind = msg["t"]
+        kind, rid = msg["t"], msg.get("id")
         if kind == "restart":
-            name, value = "EMU_RESTART", "TRUE"
+            if not config.emulated:
+                raise ValueError("restart is only for the embedded emulator")
+            name, value = RESTART_VARIABLE, "TRUE"
         else:
-            name = _name(msg["name"])
-            value = str(msg.get("value", ""))
-            if len(value) > MAX_VALUE:
-                raise ValueError(f"value longer than {MAX_VALUE} characters")
+            name = variable_name(msg.get("name"))
+            value = msg.get("value", "")
+            if kind == "write":
+                refused = write_refusal(name, allow_motion=config.allow_motion_writes)
+                if refused is not None:
+                    limit.warning("write", "refused a page's write of %s: %s", name, refused)
+                    reply(page, {"t": "result", "id": rid, "name": name, "error": refused})
+                    return
+                if not isinstance(value, str) or len(value) > MAX_VALUE:
+                    raise ValueError(f"value: a KRL literal of at most {MAX_VALUE} characters")
+                problem = check_literal(value)
+                if problem is not None:
+                    raise ValueError(f"{value[:40]!r} is not a KRL literal: {problem.reason}")
+        if page.busy:
+            reply(page, {"t": "result", "id": rid, "error": "busy: one at a time"})
+            return
         page.busy = True
 
         async def run() -> None:
-            out: dict[str, Any] = {"t": "result", "id": msg.get("id"), "name": name}
+            out: dict[str, Any] = {"t": "result", "id": rid, "name": name}
             try:
                 if kind == "read":
                     out["text"] = await link.client.read(name)
-                else:
+                elif kind == "restart":
                     out["text"] = await link.client.write(name, value)
+                else:  # kvp write's checks: the likely reason of a refusal, a program stop
+                    outcome = await checked_write(link.client, name, value)
+                    out["text"] = outcome.echo
+                    if outcome.stop is not None:
+                        out["stop"] = outcome.stop.describe()
+                    log.info("a page wrote %s = %s", name, value)
             except KvpError as exc:
                 out["error"] = str(exc)
             finally:
@@ -274,7 +321,9 @@ def create_app(link: RobotLink, jog: JogController, config: WebConfig) -> Starle
     middleware = [Middleware(_SecurityHeaders)]
     if config.token is None:
         middleware.append(Middleware(TrustedHostMiddleware, allowed_hosts=list(LOOPBACK_HOSTS)))
-    return Starlette(routes=routes, middleware=middleware)
+    app = Starlette(routes=routes, middleware=middleware)
+    app.state.pages = pages  # the connected pages (tests and the abuse suite count them)
+    return app
 
 
 class _SecurityHeaders:
@@ -294,10 +343,3 @@ class _SecurityHeaders:
             await send(message)
 
         await self.app(scope, receive, send_with_headers)
-
-
-def _name(value: object) -> str:
-    name = str(value).strip()
-    if not name or len(name) > MAX_NAME or any(c.isspace() for c in name):
-        raise ValueError(f"bad variable name {name[:MAX_NAME]!r}")
-    return name

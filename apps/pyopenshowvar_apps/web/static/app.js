@@ -233,7 +233,8 @@ function updateWatch(values) {
   }
 }
 function onResult(m) {
-  const where = m.error ? `Error: ${m.error}` : `${m.name} = ${m.text}`;
+  const stop = m.stop ? ` (the program stopped: ${m.stop})` : "";
+  const where = m.error ? `Error: ${m.error}` : `${m.name} = ${m.text}${stop}`;
   $("jogstate").textContent = where;
 }
 $("watchadd").addEventListener("submit", (e) => {
