@@ -5,8 +5,11 @@
 only if it reproduces the arm's own forward kinematics at random configurations:
 
 * **kuka** — KUKA six-axis arms (``arm.kuka``): a 3-DOF position input moves the TCP and
-  holds the flange orientation of θ_a (what a translational jog does); the exact closed form of
-  :mod:`pyopenshowvar.kinematics.inverse` gives every solution, the one nearest θ_a wins.
+  holds the flange orientation (what a translational jog does): the orientation of the first
+  θ_a the solver sees after it is made or :meth:`~ClosedFormSolver.reset` — latched, since one
+  re-read from a moving, lagging arm would drift (we watched the wrist run into its limit
+  that way). The exact closed form of :mod:`pyopenshowvar.kinematics.inverse` gives every
+  solution; the one nearest θ_a wins.
 * **3r** — an articulated 3R arm whose first axis is vertical through the base origin and whose
   two other axes are parallel and horizontal, all in one plane (the thesis' knuckle-boom
   crane): slew from the target's azimuth (or the opposite one, reaching over the top), then
@@ -65,8 +68,11 @@ class ClosedForm:
         self.fk = PointFK(arm)
         self._tol = 1e-6 * max(1.0, float(np.max(np.abs(arm.fk(arm.home_q)[:3, 3]))))
 
-    def candidates(self, x: FloatArray, q_a: FloatArray) -> FloatArray:
-        """Raw branch solutions ``(k, m, dof)`` for targets ``(k, 3)`` (NaN = none)."""
+    def candidates(
+        self, x: FloatArray, q_a: FloatArray, rot: FloatArray | None = None
+    ) -> FloatArray:
+        """Raw branch solutions ``(k, m, dof)`` for targets ``(k, 3)`` (NaN = none);
+        ``rot`` is the flange orientation a KUKA arm holds (default: θ_a's)."""
         p, k, n = self.p, len(x), self.arm.dof
         if self.kind == "3r":
             az = np.arctan2(x[:, 1], x[:, 0])
@@ -91,16 +97,20 @@ class ClosedForm:
 
         assert self.arm.kuka is not None
         pose = np.broadcast_to(self.arm.fk(q_a), (k, 4, 4)).copy()
+        if rot is not None:
+            pose[:, :3, :3] = rot
         pose[:, :3, 3] = x
         q = inverse(self.arm.kuka, pose, current=np.broadcast_to(q_a, (k, n)), errors="nan")
         return np.asarray(q[:, None, :])
 
-    def best(self, x: npt.ArrayLike, q_a: npt.ArrayLike) -> FloatArray:
+    def best(
+        self, x: npt.ArrayLike, q_a: npt.ArrayLike, rot: FloatArray | None = None
+    ) -> FloatArray:
         """Per target ``(k, 3)``: the solution inside the limits nearest ``q_a`` (NaN row if
         there is none)."""
         xa = np.atleast_2d(np.asarray(x, dtype=np.float64))
         qa = np.asarray(q_a, dtype=np.float64)
-        cand = self.candidates(xa, qa)
+        cand = self.candidates(xa, qa, rot)
         lo, hi, rev = self.arm.lower, self.arm.upper, self.arm.revolute
         # per joint, the ±360° equivalent inside the limits nearest θ_a
         shifts = np.array([0.0, -360.0, 360.0])
@@ -199,11 +209,19 @@ class ClosedFormSolver(Solver):
             )
         super().__init__(arm, **options)
         self.cf = cf
+        #: The flange orientation a KUKA arm holds (latched at the first call).
+        self.orientation: FloatArray | None = None
+
+    def reset(self) -> None:
+        self.orientation = None
 
     def _solve(
         self, x: FloatArray, q_a: FloatArray, deadline: float
     ) -> tuple[FloatArray, int, float, bool]:
-        q = self.cf.best(x, q_a)[0]
+        if self.cf.kind == "kuka" and self.orientation is None:
+            self.orientation = np.array(self.arm.fk(q_a)[:3, :3])
+        rot = self.orientation
+        q = self.cf.best(x, q_a, rot)[0]
         if np.all(np.isfinite(q)):
             return q, 1, 0.0, True
         # out of reach: as far along the line from the current tip as the closed form goes
@@ -211,7 +229,7 @@ class ClosedFormSolver(Solver):
         lo, hi, best = 0.0, 1.0, q_a
         for _ in range(BISECT):
             mid = (lo + hi) / 2.0
-            qm = self.cf.best(start + mid * (x - start), q_a)[0]
+            qm = self.cf.best(start + mid * (x - start), q_a, rot)[0]
             if np.all(np.isfinite(qm)):
                 lo, best = mid, qm
             else:
