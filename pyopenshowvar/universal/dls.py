@@ -26,7 +26,7 @@ import numpy.typing as npt
 from ..arms.ik import solve as ik_solve
 from ..arms.model import Arm
 from ..kinematics.frames import FloatArray
-from .solver import Solver
+from .solver import SolveInfo, Solver
 
 __all__ = ["LAMBDA_MAX", "DLSSolver"]
 
@@ -81,12 +81,13 @@ class DLSSolver(Solver):
         q = self._config(q_a)
         xdot = self._target(xdot_ds)
         start = self.clock()
-        # the joint units (deg) are small against mm: scale columns so the damping treats
-        # every joint alike (J per rad, then back to deg/s)
-        qdot = self._dls(self._jacobian(q) * self._to_api, xdot) * self._to_api
+        # joints in units of their range: a prismatic joint's mm and a revolute joint's rad
+        # would otherwise differ by orders of magnitude and the damping would freeze the one
+        # with the smaller column
+        qdot = self._dls(self._jacobian(q) * self.span, xdot) * self.span
         out = self.limit_rate(q, qdot, dt)
         err = float(np.linalg.norm(self._jacobian(q) @ out - xdot))
-        self.last = self.last.__class__(err * dt, self.clock() - start, 1, err, True)
+        self.last = SolveInfo(err * dt, self.clock() - start, 1, err, True)
         return out
 
     def _jac_fd(self, q: FloatArray) -> FloatArray:
@@ -111,10 +112,10 @@ class DLSSolver(Solver):
         mu, steps, stalled = 1.0, 0, 0
         while err > self.tol and steps < LOCAL_STEPS and self.clock() < deadline:
             steps += 1
-            jn = self._jac_fd(q) * (self._to_api / scale)  # per rad (per mm), normalised
+            jn = self._jac_fd(q) * (self.span / scale)  # per joint range, normalised
             en = e / scale
             lam = mu * (0.05 * float(en @ en) + 1e-9)
-            dq = jn.T @ np.linalg.solve(jn @ jn.T + lam * np.eye(3), en) * self._to_api
+            dq = jn.T @ np.linalg.solve(jn @ jn.T + lam * np.eye(3), en) * self.span
             ratio = float(np.max(np.abs(dq) / self._max_step))
             if ratio > 1.0:
                 dq = dq / ratio

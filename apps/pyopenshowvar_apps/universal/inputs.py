@@ -104,7 +104,7 @@ def hold(vector: Sequence[float], until: float = math.inf) -> Script:
 
 
 class ScriptedInput(InputDevice):
-    """``script(t)`` for ``duration`` seconds from :meth:`start`; afterwards the device
+    """``script(t)`` for ``duration`` seconds from the first poll; afterwards the device
     ``end``\\ s: ``"silent"`` (its last sample grows stale: the server's deadline stops the
     arm), ``"disconnect"`` (it reports itself gone) or ``"release"`` (zero signal, still
     there). ``commands`` are ``(t, key, value)`` switches delivered once each at time t."""
@@ -118,18 +118,13 @@ class ScriptedInput(InputDevice):
         duration: float = math.inf,
         end: str = "release",
         commands: Sequence[tuple[float, str, str]] = (),
-        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         if end not in ("silent", "disconnect", "release"):
             raise ValueError(f"end must be silent, disconnect or release, not {end!r}")
         self.script, self.duration, self.end = script, duration, end
-        self.clock = clock
         self.t0: float | None = None
         self._pending = sorted(commands)
         self._last: InputSample | None = None
-
-    async def start(self) -> None:
-        self.t0 = self.clock()
 
     def poll(self, now: float) -> InputSample | None:
         if self.t0 is None:
