@@ -5,8 +5,9 @@ velocity mode) come at an irregular rate and, for the stochastic solvers, with j
 they reach the arm, two stages make them a motion the arm can follow:
 
 * :class:`Trajectory` — a reference (θ_ref, θ̇_ref) that moves towards θ_d (position mode) or
-  at θ̇_d (velocity mode) within each joint's speed and acceleration limits, braking in time
-  to stop on θ_d, and never leaving the joint limits ("a well-suited trajectory ensures that
+  at θ̇_d (velocity mode) within each joint's speed and acceleration limits (the velocity
+  vector is scaled as a whole, so the joints stay in step and the tip keeps its direction),
+  braking in time to stop on θ_d, and never leaving the joint limits ("a well-suited trajectory ensures that
   no kinematic nor dynamic limits are exceeded");
 * :class:`TrackingPID` — one PID per joint on the reference: the joint velocity command
   ``u = θ̇_ref + Kp·e + Ki·∫e + Kd·(θ̇_ref − θ̇_a)``, e = θ_ref − θ_a, clamped to the speed
@@ -62,9 +63,14 @@ class Trajectory:
         self.ref_dot = np.zeros_like(self.ref)
 
     def _advance(self, wanted: FloatArray, dt: float) -> None:
-        step = self.accel * dt
-        self.ref_dot = np.clip(wanted, self.ref_dot - step, self.ref_dot + step)
-        self.ref_dot = np.clip(self.ref_dot, -self.speed, self.speed)
+        # the whole vector is scaled, never a joint alone: joints that reach their speed at
+        # different times would bend the tip's path off the commanded direction
+        over = float(np.max(np.abs(wanted) / self.speed))
+        if over > 1.0:
+            wanted = wanted / over
+        change = wanted - self.ref_dot
+        ratio = float(np.max(np.abs(change) / (self.accel * dt)))
+        self.ref_dot = self.ref_dot + (change / ratio if ratio > 1.0 else change)
         nxt = self.ref + self.ref_dot * dt
         wall = (nxt < self.lower) | (nxt > self.upper)
         self.ref = np.clip(nxt, self.lower, self.upper)
@@ -88,7 +94,7 @@ class TrackingPID:
     """Per-joint PID from the reference to a joint velocity command (deg/s, mm/s)."""
 
     def __init__(
-        self, speed: FloatArray, *, kp: float = 8.0, ki: float = 4.0, kd: float = 0.0
+        self, speed: FloatArray, *, kp: float = 8.0, ki: float = 0.5, kd: float = 0.5
     ) -> None:
         self.speed = np.asarray(speed, dtype=np.float64)
         self.kp, self.ki, self.kd = kp, ki, kd
