@@ -139,8 +139,10 @@ class DLSSolver(Solver):
         # the batched LM with restarts (θ_a first, so a near target converges from it and the
         # nearest solution wins); it gets most of the budget
         remaining = deadline - self.clock()
+        # (no ``preferred``: its null-space polish runs a fixed number of steps past any
+        # deadline; of candidates converging together the one nearest the seed wins anyway)
         res = ik_solve(
-            self.arm, x, q_a, preferred=q_a, tool=self.tool, tol=self.tol * 1e-3,
+            self.arm, x, q_a, tool=self.tool, tol=self.tol * 1e-3,
             timeout=max(remaining * IK_SHARE, 1e-6), clock=self.clock, rng=self.rng,
         )  # fmt: skip
         if bool(res.ok):
