@@ -70,6 +70,7 @@ class GASolver(Solver):
         mutation_size: float = 0.05,
         target_cost: float = 1e-3,
         seed_actual: bool = True,
+        max_generations: int | None = None,
         **options: Any,
     ) -> None:
         super().__init__(arm, **options)
@@ -80,6 +81,8 @@ class GASolver(Solver):
         self.mutation_size = mutation_size
         self.target_cost = target_cost
         self.seed_actual = seed_actual
+        #: A fixed number of generations instead of the budget (reproducible benchmarks).
+        self.max_generations = max_generations
         #: The last population, fittest first (its elite seeds the next call).
         self.population: FloatArray | None = None
 
@@ -112,7 +115,10 @@ class GASolver(Solver):
         while True:
             order = np.argsort(cost)
             pop, cost = pop[order], cost[order]
-            if cost[0] <= goal or self.clock() >= deadline:
+            if cost[0] <= goal:
+                break
+            if (self.clock() >= deadline if self.max_generations is None
+                    else generations >= self.max_generations):  # fmt: skip
                 break
             # an even number of parents, so every one is in a pair
             n_par = n_children + (n_children % 2)

@@ -72,6 +72,7 @@ class PSOSolver(Solver):
         vmax: float = VMAX,
         carry: float = 0.2,
         seed_actual: bool = True,
+        max_iterations: int | None = None,
         **options: Any,
     ) -> None:
         super().__init__(arm, **options)
@@ -82,6 +83,8 @@ class PSOSolver(Solver):
         self.vmax = vmax * self.span
         self.carry = round(carry * self.size)
         self.seed_actual = seed_actual
+        #: A fixed number of iterations instead of the budget (reproducible benchmarks).
+        self.max_iterations = max_iterations
         self.pbest: FloatArray | None = None
 
     def reset(self) -> None:
@@ -121,7 +124,8 @@ class PSOSolver(Solver):
         def done() -> bool:
             return bool(pcost[g] < self.target_cost if step is None else pdist[g] <= step)
 
-        while not done() and self.clock() < deadline:
+        limit = self.max_iterations
+        while not done() and (self.clock() < deadline if limit is None else iterations < limit):
             r1 = rng.random((size, n))
             r2 = rng.random((size, n))
             v = self.w * v + self.c1 * r1 * (pbest - s) + self.c2 * r2 * (pbest[g] - s)

@@ -11,7 +11,8 @@ they reach the arm, two stages make them a motion the arm can follow:
   no kinematic nor dynamic limits are exceeded");
 * :class:`TrackingPID` — one PID per joint on the reference: the joint velocity command
   ``u = θ̇_ref + Kp·e + Ki·∫e + Kd·(θ̇_ref − θ̇_a)``, e = θ_ref − θ_a, clamped to the speed
-  limits (the integral holds while clamped). A velocity command suits every arm behind the
+  limits (the integral accumulates only while the joint's reference stands still and the
+  command is not clamped). A velocity command suits every arm behind the
   server: hydraulic valves (the crane simulator), drives in velocity mode (the simulated
   arms), increments per interpolation cycle (a KRC over KVP).
 
@@ -110,6 +111,9 @@ class TrackingPID:
         trial = self.integral + e * dt
         raw = ref_dot + self.kp * e + self.ki * trial + self.kd * (ref_dot - qdot)
         u = np.clip(raw, -self.speed, self.speed)
-        # conditional integration: no wind-up while the command is clamped
-        self.integral = np.where(u == raw, trial, self.integral)
+        # conditional integration: only while the joint's reference stands still (the integral
+        # holds against a steady load; integrating the lag of a moving joint would push it
+        # past the point where it is told to stop) and its command is not clamped
+        hold = (ref_dot == 0.0) & (u == raw)
+        self.integral = np.where(hold, trial, self.integral)
         return np.asarray(u)

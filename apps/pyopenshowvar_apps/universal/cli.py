@@ -89,13 +89,13 @@ def universal(
             load_arm(name)
     except (ArmFileError, UnknownArmError) as exc:
         fail(EXIT_USAGE, str(exc))
-    over_kvp = kvp is not None or Opts.emulate
-    if over_kvp and the_arm.kuka is None:
-        fail(EXIT_USAGE, f"{the_arm.key or arm}: only KUKA six-axis arms are driven over KVP")
     target: tuple[str, int] | None = None
     if kvp is not None:
         target = _hostport(kvp, "--kvp")
-    elif Opts.emulate:
+    over_kvp = kvp is not None or Opts.emulate
+    if over_kvp and the_arm.kuka is None:
+        fail(EXIT_USAGE, f"{the_arm.key or arm}: only KUKA six-axis arms are driven over KVP")
+    if kvp is None and Opts.emulate:
         from pyopenshowvar_apps.web.runner import KRL_DIR
 
         start_embedded_emulator(ctx, program=str(KRL_DIR / "kvp_jog.src"),
