@@ -73,6 +73,7 @@ class KvpArm(ArmBackend):
         self._state: JointState | None = None
         self._count = 0
         self._jogging = False
+        self._acc = -1  # JOG_ACC as last written
         self.writes = 0
 
     def speed_caps(self) -> FloatArray:
@@ -146,8 +147,11 @@ class KvpArm(ArmBackend):
             return
         inc = u * CADENCE
         acc = math.ceil(100.0 * float(np.max(np.abs(u) / CADENCE / self.arm.max_accel)))
-        writes: list[tuple[str, object]] = [
-            ("JOG_ACC", str(max(1, min(100, acc)))),
+        acc = max(1, min(100, acc))
+        writes: list[tuple[str, object]] = []
+        if acc != self._acc:  # every access costs a KVP round trip: only what changed
+            writes.append(("JOG_ACC", str(acc)))
+        writes += [
             ("JOG_AX", Axis(**{k: float(v) for k, v in zip(_AXES, inc, strict=True)})),
             ("JOG_UNTIL", str(self._count + CREDIT)),
         ]
@@ -157,13 +161,16 @@ class KvpArm(ArmBackend):
             await self.client.write_many(writes)  # type: ignore[arg-type]
         except (KvpError, OSError) as exc:
             self._jogging = False
+            self._acc = -1
             raise BackendError(f"the jog write failed: {exc}") from None
         self._jogging = True
+        self._acc = acc
         self.writes += 1
 
     async def stop(self) -> None:
         """Zero the increment first, then the credit and the mode (pipelined)."""
         self._jogging = False
+        self._acc = -1
         try:
             await self.client.write_many([("JOG_AX", _ZERO), ("JOG_UNTIL", "0"), ("JOG_MODE", "0")])
         except (KvpError, OSError) as exc:
