@@ -41,7 +41,8 @@ from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
-from ..web.server import BURST, LOOPBACK_HOSTS, MAX_MESSAGE, RATE, STATIC, _SecurityHeaders
+from ..web.server import LOOPBACK_HOSTS, MAX_MESSAGE, STATIC, _SecurityHeaders
+from ..web.server import _Page as PadPage
 from .inputs import InputDevice, InputSample
 
 __all__ = ["HOLD_TIMEOUT", "ViewServer", "WebInput", "create_app"]
@@ -56,22 +57,13 @@ _AXIS = {"X": 0, "Y": 1, "Z": 2}
 _SWITCHES = ("arm", "solver", "mode")
 
 
-class _Page:
-    def __init__(self, ws: WebSocket) -> None:
-        self.ws = ws
-        self.seen = time.monotonic()
-        self.tokens, self.stamp = BURST, time.monotonic()
-        self.state: dict[str, Any] | None = None
-        self.wake = asyncio.Event()
+class _Page(PadPage):
+    """One open page: the pad's (its message budget, its latest unsent state) and when it
+    last said anything."""
 
-    def allow(self) -> bool:
-        now = time.monotonic()
-        self.tokens = min(BURST, self.tokens + (now - self.stamp) * RATE)
-        self.stamp = now
-        if self.tokens < 1.0:
-            return False
-        self.tokens -= 1.0
-        return True
+    def __init__(self, ws: WebSocket) -> None:
+        super().__init__(ws)
+        self.seen = time.monotonic()
 
 
 class WebInput(InputDevice):
