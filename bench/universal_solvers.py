@@ -11,7 +11,7 @@ tip FK, so every library evaluates a whole population in one call):
   evaluated through a batched ``map``. PyGAD: ``parent_selection_type="sus"``,
   ``crossover_type="single_point"`` (it has no per-pair switch), ``mutation_type="random"``,
   ``keep_elitism``, ``fitness_batch_size`` = the population, stopped by ``on_generation``.
-* **PSO** — 10 particles per DOF, w = 0.7298, c1 = c2 = 1.49618, position bounds. pyswarms
+* **PSO** — 10 particles per DOF, our w, c1, c2 (pso.py), position bounds. pyswarms
   ``GlobalBestPSO`` (no time budget: a fixed iteration count, timed).
 
 Per library: generations (iterations) per 20 ms of CPU time and the median error (% of the
@@ -33,6 +33,7 @@ import numpy as np
 from pyopenshowvar.arms import Arm, load_arm
 from pyopenshowvar.universal import make_solver
 from pyopenshowvar.universal.pointfk import PointFK
+from pyopenshowvar.universal.pso import C1, C2, W
 from pyopenshowvar.universal.workspace import workspace_of
 
 BUDGET = 0.020
@@ -130,7 +131,7 @@ def pyswarms_pso(arm: Arm, x: np.ndarray, q0: np.ndarray) -> tuple[np.ndarray, i
 
     cost = _cost_fn(arm, x)
     opt = GlobalBestPSO(n_particles=10 * arm.dof, dimensions=arm.dof,
-                        options={"c1": 1.49618, "c2": 1.49618, "w": 0.7298},
+                        options={"c1": C1, "c2": C2, "w": W},
                         bounds=(arm.lower.copy(), arm.upper.copy()))  # fmt: skip
     # no time budget in pyswarms: time one short run, then run as many iterations as fit
     t0 = CLOCK()
