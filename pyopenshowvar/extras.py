@@ -45,6 +45,7 @@ EXTRA_OF: dict[str, str] = {
             "segno",
             "skimage",
             "scipy",
+            "google",  # protobuf: kvp universal's link to external simulators
         ),
         "apps",
     ),

@@ -5,6 +5,7 @@
     kvp arms list [--json]                 # name, axes, family, IK, source of every entry
     kvp arms show kr210_r2700_2 [--json]   # joints, limits, speeds, masses, source, licence
     kvp arms show my_crane.toml            # a TOML or URDF file works the same way
+    kvp arms bench knuckle_boom_crane --solver ga --targets 512 [--json] [--dump F.csv] [--plot F.png]
 
 A name that is neither a catalogue entry nor a file, or a file that cannot be used, is one
 line on stderr and exit code 2.
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
@@ -138,3 +140,58 @@ def show(
     ):
         if src[key]:
             out(f"{label:<12} {src[key]}")
+
+
+@arms_app.command("bench")
+def bench(
+    name: Annotated[str, typer.Argument(help="Catalogue name or a .toml/.urdf file.")],
+    solver: Annotated[str, typer.Option("--solver", help="closed-form, dls, ga or pso.")] = "dls",
+    targets: Annotated[
+        int, typer.Option("--targets", help="Targets: a cube (the thesis: 512 = 8 × 8 × 8).")
+    ] = 512,
+    as_json: Json = False,
+    dump: Annotated[
+        Path | None, typer.Option("--dump", help="Write every target, solution and error as CSV.")
+    ] = None,
+    plot: Annotated[
+        Path | None, typer.Option("--plot", help="Write a 3D scatter PNG of the errors (Fig. 3.8).")
+    ] = None,
+    budget_ms: Annotated[
+        float, typer.Option("--budget-ms", help="Time budget per target (the thesis: 20 ms).")
+    ] = 20.0,
+    clock: Annotated[
+        str, typer.Option("--clock", help="wall (the thesis) or cpu (this process's CPU time).")
+    ] = "wall",
+    seed: Annotated[int, typer.Option("--seed", help="Random seed of the GA and PSO.")] = 0,
+) -> None:
+    """The thesis' accuracy test (§3.2.1.1): solve targets spaced evenly in the box around the
+    workspace in position mode; error (mm, % of the workspace), reachable, time per target."""
+    from pyopenshowvar.universal import SOLVERS, NoClosedFormError
+    from pyopenshowvar_apps.universal.armsbench import (
+        plot_report,
+        run_bench,
+        summary_lines,
+        write_dump,
+        write_json,
+    )
+
+    arm = _load(name)
+    if solver not in SOLVERS:
+        fail(EXIT_USAGE, f"--solver must be one of {', '.join(SOLVERS)}, not {solver!r}")
+    if clock not in ("wall", "cpu"):
+        fail(EXIT_USAGE, f"--clock must be wall or cpu, not {clock!r}")
+    if not 0.1 <= budget_ms <= 10_000:
+        fail(EXIT_USAGE, f"--budget-ms must be 0.1..10000, got {budget_ms:g}")
+    try:
+        report = run_bench(
+            arm, solver, targets=targets, budget_ms=budget_ms, clock=clock, seed=seed
+        )
+    except NoClosedFormError as exc:
+        fail(EXIT_USAGE, str(exc))
+    except ValueError as exc:
+        fail(EXIT_USAGE, str(exc))
+    if dump is not None:
+        write_dump(report, dump)
+    if plot is not None:
+        plot_report(report, plot)
+    typer.echo(write_json(report) if as_json else "\n".join(summary_lines(report)))
