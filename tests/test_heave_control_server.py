@@ -79,7 +79,7 @@ async def test_tasks_hold_the_start_pose_and_log_the_platform(
     kvp, plc = rig
     # the program first drives to HEAVE_HOME (a PTP of a second or so), then says it is ready
     async with asyncio.timeout(10.0):
-        while str(await kvp.read(READY_VARIABLE)).strip().upper() != "TRUE":
+        while str(await kvp.read(READY_VARIABLE)).strip().upper() != "TRUE":  # noqa: ASYNC110 (a robot variable: polled)
             await asyncio.sleep(0.05)
     server = ControlServer(kvp, plc, None, config=ControlConfig(attitude="plc"))
     await server.start(wave_t0=123.0)
