@@ -45,6 +45,7 @@ EXTRA_OF: dict[str, str] = {
             "segno",
             "skimage",
             "scipy",
+            "waveresponse",
         ),
         "apps",
     ),

@@ -79,7 +79,9 @@ def _skew(w: FloatArray) -> FloatArray:
     ).reshape(-1, 3, 3)
 
 
-def _saturate(tac: TAC, p: FloatArray, centre: FloatArray) -> tuple[FloatArray, FloatArray]:
+def _saturate(
+    tac: TAC, p: FloatArray, centre: FloatArray
+) -> tuple[FloatArray, npt.NDArray[np.bool_]]:
     """Points moved back along the line to ``centre`` until reachable (bisection); the mask
     of the points that had to move."""
     out = tac.reachable(p)
@@ -180,7 +182,7 @@ def _pid_motor(
     output is that rest plus the zero-state response to the inputs' departure from it,
     filtered as transfer functions (scipy.signal.ss2tf, lfilter).
     """
-    from scipy.signal import lfilter, ss2tf
+    from scipy.signal import lfilter, ss2tf  # type: ignore[import-untyped]
 
     kp, ki, kd, k, tm, dt = cfg.kp, cfg.ki, cfg.kd, cfg.k_dc, cfg.t_dc, cfg.dt
     g = 1.0 / (1.0 + kd * k / tm)

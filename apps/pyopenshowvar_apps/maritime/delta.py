@@ -69,7 +69,7 @@ class TAC:
         local = np.stack(
             [self.l_a * np.sin(al), self.a - self.l_a * np.cos(al), np.zeros_like(al)], axis=-1
         )
-        return np.einsum("ijk,...ik->...ij", R_ARMS, local)
+        return np.asarray(np.einsum("ijk,...ik->...ij", R_ARMS, local))
 
     def in_range(self, alpha: npt.ArrayLike) -> npt.NDArray[np.bool_]:
         """True where every angle is a real number inside [α_min, α_max]."""
@@ -164,7 +164,7 @@ class Workspace:
     @cached_property
     def hull(self) -> object:
         """scipy's ConvexHull of the reachable points (the paper's workspace limits)."""
-        from scipy.spatial import ConvexHull
+        from scipy.spatial import ConvexHull  # type: ignore[import-untyped]
 
         return ConvexHull(self.points)
 

@@ -257,7 +257,7 @@ def _evaluate(
     e1 = np.sqrt(np.sum(w * dq**2, axis=-1))  # eq. 4 (deg)
     e2 = np.sum(1.0 / np.maximum(clear[:, -1], EPS), axis=(-2, -1))  # eq. 5, as closeness
     area = projected_area(pts, sc.link_radius, sc.flow)  # (n, S), eq. 7
-    e3 = np.trapezoid(area, s, axis=-1)  # eq. 8 over the change, T normalised
+    e3 = np.asarray(np.trapezoid(area, s, axis=-1))  # eq. 8 over the change, T normalised
     beta = sc.beta if drag else (sc.beta[0], sc.beta[1], 0.0)
     e = _normalised([e1[safe], e2[safe], e3[safe]], beta)
     k = int(np.flatnonzero(safe)[int(np.argmin(e))])

@@ -48,7 +48,7 @@ def write_plans(plans: list[Plan], folder: Path, *, plots: bool = True) -> list[
 
 
 def _box(ax: Any, lo: np.ndarray, hi: np.ndarray) -> None:
-    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # type: ignore[import-untyped]
 
     x, y, z = np.array([lo, hi]).T
     corners = np.array([[x[i], y[j], z[k]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
