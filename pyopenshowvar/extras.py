@@ -46,6 +46,7 @@ EXTRA_OF: dict[str, str] = {
             "skimage",
             "scipy",
             "google",  # protobuf: kvp universal's link to external simulators
+            "waveresponse",
         ),
         "apps",
     ),

@@ -161,16 +161,34 @@ def cobra_fk(q: npt.ArrayLike) -> npt.NDArray[np.float64]:
     )
 
 
+def ship_crane_fk(q: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """Henriksen et al.'s Table 3 (standard D-H, first row fixed), Table 4's lengths in mm."""
+    b0, b1, b2 = np.radians(np.asarray(q))
+    return (
+        dh_standard(-20700, PI, -3000, 0.0)
+        @ dh_standard(0, H, 3000, b0)
+        @ dh_standard(19200, 0, 0, b1)
+        @ dh_standard(9600, -H, 0, b2)
+    )
+
+
 def reference_fk(name: str, q: npt.ArrayLike) -> npt.NDArray[np.float64]:
     if name == "knuckle_boom_crane":
         return crane_fk(q)
+    if name == "supply_vessel_crane":
+        return ship_crane_fk(q)
     if name == "adept_cobra600":
         return cobra_fk(q)
     return urdf_fk(URDF_CHAINS[name], q)
 
 
 def test_every_catalogue_arm_has_an_independent_reference() -> None:
-    assert set(catalogue()) == {*URDF_CHAINS, "knuckle_boom_crane", "adept_cobra600"}
+    assert set(catalogue()) == {
+        *URDF_CHAINS,
+        "knuckle_boom_crane",
+        "supply_vessel_crane",
+        "adept_cobra600",
+    }
 
 
 @pytest.mark.parametrize("name", catalogue())
@@ -219,7 +237,14 @@ def test_closed_form_tables_of_the_kuka_family(name: str, lengths: tuple[float, 
 
 
 @pytest.mark.parametrize(
-    "name", ["knuckle_boom_crane", "adept_cobra600", "kuka_youbot_arm", "lbr_iiwa14_r820"]
+    "name",
+    [
+        "knuckle_boom_crane",
+        "supply_vessel_crane",
+        "adept_cobra600",
+        "kuka_youbot_arm",
+        "lbr_iiwa14_r820",
+    ],
 )
 def test_arms_outside_the_kuka_family_have_no_closed_form(name: str) -> None:
     assert load_arm(name).kuka is None
