@@ -147,3 +147,27 @@ async def test_token_and_origin_are_required() -> None:
         ws = await open_page(view, "secret-token-1")
         await ws.close()
     await server.close()
+
+
+@pytest.mark.parametrize(
+    ("frame", "code"),
+    [
+        ('{"t": "jog", "key": "X", "dir": 1, "level": NaN}', 1007),
+        ('{"t": "jog", "key": "X", "dir": 1, "level": 1e999}', 1007),
+        ("[" * 2000 + "]" * 2000, 1007),
+        (b"\x00\x01binary", 1003),
+    ],
+)
+async def test_a_crafted_message_closes_the_page_with_a_reason(
+    page_rig: Any, frame: str | bytes, code: int
+) -> None:
+    """The pad's message rules, from the same code: never a traceback, never a motion."""
+    server, view = page_rig
+    ws = await open_page(view)
+    await ws.send(frame)
+    async with asyncio.timeout(5):
+        with pytest.raises(websockets.ConnectionClosed):
+            while True:
+                await ws.recv()
+    assert ws.close_code == code and ws.close_reason
+    assert np.all(server.ticks[-1].signal == 0)

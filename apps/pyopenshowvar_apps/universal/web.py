@@ -11,7 +11,12 @@ the pad's own folder, nothing is copied) — and the pad's safety rules:
   is as old as the newest ``alive`` (or ``jog``), so a frozen or vanished page goes silent
   and the server stops the arm (also in position mode: no return to the start without a
   page that is there); one page moves the arm at a time;
-* the same token, Origin and Host checks, message size and rate limits as the pad.
+* the same rules as the pad, from the same code: the token, Origin and Host checks
+  (:func:`~pyopenshowvar_apps.web.policy.refuse_connection`), strict JSON with bounded
+  nesting and finite numbers only (:func:`~pyopenshowvar_apps.web.policy.parse_message`: a
+  crafted message closes the page with a reason), the message rate
+  (:class:`~pyopenshowvar_apps.web.policy.TokenBucket`), and the HTTP guard against slow and
+  greedy clients (:mod:`pyopenshowvar_apps.web.httpguard`).
 
 The page shows the arm (the server's link frames, scaled to the view), the target, and lets
 the user switch arm, solver and mode. :class:`ViewServer` serves it for any input device
@@ -22,7 +27,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import hmac
 import json
 import logging
 import socket
@@ -41,8 +45,9 @@ from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
+from ..web.httpguard import HEAD_TIMEOUT, TOTAL, ConnectionGuard, LogLimit, guarded_protocols
+from ..web.policy import TokenBucket, Violation, parse_message, refuse_connection
 from ..web.server import LOOPBACK_HOSTS, MAX_MESSAGE, STATIC, _SecurityHeaders
-from ..web.server import _Page as PadPage
 from .inputs import InputDevice, InputSample
 
 __all__ = ["HOLD_TIMEOUT", "ViewServer", "WebInput", "create_app"]
@@ -57,12 +62,14 @@ _AXIS = {"X": 0, "Y": 1, "Z": 2}
 _SWITCHES = ("arm", "solver", "mode")
 
 
-class _Page(PadPage):
-    """One open page: the pad's (its message budget, its latest unsent state) and when it
-    last said anything."""
+class _Page:
+    """One open page: its latest unsent state, its message budget, when it last spoke."""
 
     def __init__(self, ws: WebSocket) -> None:
-        super().__init__(ws)
+        self.ws = ws
+        self.state: dict[str, Any] | None = None
+        self.wake = asyncio.Event()
+        self.bucket = TokenBucket(time.monotonic())
         self.seen = time.monotonic()
 
 
@@ -134,17 +141,12 @@ def create_app(
     async def index(request: Request) -> Response:
         return FileResponse(OWN_STATIC / "universal.html")
 
-    def refused(ws: WebSocket) -> str | None:
-        origin, host = ws.headers.get("origin"), ws.headers.get("host", "")
-        if origin is not None and origin not in (f"http://{host}", f"https://{host}"):
-            return "wrong origin"
-        if token is not None and not hmac.compare_digest(
-            ws.query_params.get("token", "").encode(), token.encode()
-        ):
-            return "token missing or wrong"
-        return None
-
     pages: set[_Page] = set()
+    limit = LogLimit(log)  # what pages do wrong is logged, but never floods the log
+
+    async def close(ws: WebSocket, code: int, reason: str) -> None:
+        with contextlib.suppress(WebSocketDisconnect, OSError, RuntimeError):
+            await ws.close(code=code, reason=reason)
 
     async def sender(page: _Page) -> None:
         with contextlib.suppress(WebSocketDisconnect, RuntimeError):
@@ -156,13 +158,17 @@ def create_app(
                     await page.ws.send_text(json.dumps(state))
 
     async def stream(ws: WebSocket) -> None:
-        why = refused(ws)
+        host = ws.client.host if ws.client else "?"
+        why = refuse_connection(
+            ws.headers.get("origin"), ws.headers.get("host", ""), ws.query_params.get("token"),
+            token,
+        )  # fmt: skip
         if why is not None:
-            log.warning("refused a WebSocket from %s: %s", ws.client, why)
-            await ws.close(code=1008)
+            limit.warning(f"refused {host}", "refused a WebSocket from %s: %s", host, why)
+            await close(ws, 1008, why)
             return
         if len(pages) >= MAX_PAGES:
-            await ws.close(code=1013)
+            await close(ws, 1013, "too many pages")
             return
         await ws.accept()
         page = _Page(ws)
@@ -174,14 +180,22 @@ def create_app(
         task = asyncio.create_task(sender(page))
         try:
             while True:
-                text = await ws.receive_text()
-                if not page.allow():
-                    await ws.close(code=1008, reason="too many messages")
+                message = await ws.receive()
+                if message["type"] == "websocket.disconnect":
+                    break
+                if not page.bucket.allow(time.monotonic()):
+                    await close(ws, 1008, "too many messages")
+                    break
+                text = message.get("text")
+                try:
+                    msg = parse_message(text if text is not None else message.get("bytes"))
+                except Violation as exc:
+                    limit.warning(
+                        f"closed {host}", "closed a WebSocket of %s: %s", host, exc.reason
+                    )
+                    await close(ws, exc.code, exc.reason)
                     break
                 try:
-                    msg = json.loads(text)
-                    if not isinstance(msg, dict):
-                        raise ValueError("a message is a JSON object")
                     if web_input is None:
                         if msg.get("t") != "alive":
                             raise ValueError("this page only views: the input is another device")
@@ -193,8 +207,10 @@ def create_app(
                 except (KeyError, TypeError, ValueError) as exc:
                     page.state = {"t": "error", "message": str(exc)[:200]}
                     page.wake.set()
-        except WebSocketDisconnect:
-            pass
+                # one message per turn of the event loop: a flooding page cannot stall others
+                await asyncio.sleep(0)
+        except (WebSocketDisconnect, OSError, RuntimeError):
+            pass  # a page going away is normal, never a traceback
         finally:
             pages.discard(page)
             if web_input is not None:
@@ -243,6 +259,7 @@ class ViewServer:
             self.sock.close()
             raise
         self.port: int = self.sock.getsockname()[1]
+        self.guard = ConnectionGuard()
         self._tasks: list[asyncio.Task[Any]] = []
         self._server: uvicorn.Server | None = None
 
@@ -252,9 +269,12 @@ class ViewServer:
         return f"http://{host}:{self.port}/" + (f"#token={self.token}" if self.token else "")
 
     async def __aenter__(self) -> ViewServer:
-        config = uvicorn.Config(self.app, log_level="warning", access_log=False, lifespan="off",
-                                ws="websockets-sansio", ws_max_size=MAX_MESSAGE,
-                                ws_per_message_deflate=False, limit_concurrency=32)  # fmt: skip
+        http, ws = guarded_protocols(self.guard)  # slow and greedy clients, as the pad's
+        config = uvicorn.Config(
+            self.app, log_level="warning", access_log=False, lifespan="off", http=http, ws=ws,
+            ws_max_size=MAX_MESSAGE, ws_per_message_deflate=False, limit_concurrency=TOTAL,
+            timeout_keep_alive=int(HEAD_TIMEOUT),
+        )  # fmt: skip
         self._server = uvicorn.Server(config)
         self.sock.listen(32)
         self.sock.setblocking(False)
