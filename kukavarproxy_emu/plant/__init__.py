@@ -32,6 +32,7 @@ if TYPE_CHECKING:  # the config imports this package: keep it light
 
     from ..store import VariableStore
     from .dynamic import DynamicPlant, Truth
+    from .params import PlantParams
 
 __all__ = ["PLANTS", "Obstacle", "Plant", "make_plant"]
 
@@ -68,6 +69,7 @@ def make_plant(
     torque_noise: float | None = None,
     seed: int | None = None,
     obstacles: Sequence[Obstacle] = (),
+    params: PlantParams | None = None,
 ) -> DynamicPlant | None:
     """The plant ``kind`` (None for ``ideal``); raises ``ValueError`` for an unknown kind."""
     if kind == "ideal":
@@ -90,5 +92,6 @@ def make_plant(
         torque_noise=torque_noise,
         seed=seed,
         obstacles=obstacles,
+        params=params,
     )
     return plant
