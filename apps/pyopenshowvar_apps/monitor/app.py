@@ -30,12 +30,12 @@ from textual.widgets import DataTable, Footer, Static, TabbedContent, TabPane
 from textual.widgets.data_table import ColumnKey
 
 from pyopenshowvar import Client, KvpConnectionError, KvpError, KvpTimeoutError
+from pyopenshowvar_apps.armpick import ArmChoice
 from pyopenshowvar_apps.names import is_motion_variable
 from pyopenshowvar_apps.pretty import render_text
 from pyopenshowvar_apps.writecheck import STOP_WINDOW, check_literal, checked_write
 
 from .dialogs import ConfirmDialog, InputDialog
-from ..armpick import ArmChoice
 from .state import RobotState
 from .watchlist import WatchList
 from .widgets import DetailPane, JointsPanel, PlotsPanel, PosePanel, ProgramPanel, StatsPanel
