@@ -74,3 +74,23 @@ def test_unknown_model_name_is_drawn_as_the_kr6_and_says_so() -> None:
     assert "not in the catalogue" in choice.source
     with pytest.raises(ValueError, match="not a KUKA six-axis arm"):
         given_arm("adept_cobra600")
+
+
+def test_kvp_emulate_robot_and_refusals() -> None:
+    """``kvp --emulate --robot`` embeds that arm; a crane is refused; demo stays on the KR 6."""
+    import threading
+
+    from pyopenshowvar_apps.cli import app
+    from typer.testing import CliRunner
+
+    runner = CliRunner()
+    res = runner.invoke(
+        app, ["--emulate", "--plant", "ideal", "read", "$MODEL_NAME[]", "--robot", "kr16_r2010_2"]
+    )
+    assert res.exit_code == 0, res.output
+    assert res.stdout.strip() == '"#KR16R2010-2 C4 FLR"'
+    assert not [t for t in threading.enumerate() if t.name == "kukavarproxy-emu"]
+    res = runner.invoke(app, ["--robot", "knuckle_boom_crane", "read", "X"])
+    assert res.exit_code == 2 and "kvp universal --arm knuckle_boom_crane" in res.output
+    res = runner.invoke(app, ["--robot", "kr16_r2010_2", "demo", "--only", "heave"])
+    assert res.exit_code == 2 and "KR 6 R900 sixx" in res.output
