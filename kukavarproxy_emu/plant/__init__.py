@@ -6,7 +6,8 @@ into what a KRC4 measures and publishes:
 * ``ideal`` — no plant object: the measured axes are the set-point and ``$TORQUE_AXIS_ACT`` is
   the kinematics package's statics (exact values, for tests).
 * ``dynamic`` — :class:`~.dynamic.DynamicPlant`: a MuJoCo rigid-body model of the KR 6 R900
-  sixx (inertia, friction, motor inertia, payload) driven by joint servos, with sensor noise,
+  sixx, or of the arm ``--robot`` names (its own model file, :mod:`kukavarproxy_emu.robots`)
+  (inertia, friction, motor inertia, payload) driven by joint servos, with sensor noise,
   external wrenches and contact with :class:`Obstacle` objects, optionally with a calibration
   error (the physical robot differs from the nominal model).
 
