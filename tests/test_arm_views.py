@@ -94,3 +94,25 @@ def test_kvp_emulate_robot_and_refusals() -> None:
     assert res.exit_code == 2 and "kvp universal --arm knuckle_boom_crane" in res.output
     res = runner.invoke(app, ["--robot", "kr16_r2010_2", "demo", "--only", "heave"])
     assert res.exit_code == 2 and "KR 6 R900 sixx" in res.output
+
+
+async def test_universal_kvp_arm_drives_a_kr10_emulator() -> None:
+    """The universal architecture's KUKA path accepts an emulator of its own arm (a KR 10 runs
+    KVP_JOG, its $MODEL_NAME[] is the KR 10's); before, every emulator was a KR 6."""
+    from pyopenshowvar_apps.universal.kvparm import KvpArm
+    from pyopenshowvar_apps.web.runner import KRL_DIR
+
+    from kukavarproxy_emu import EmulatorConfig, EmulatorThread
+    from pyopenshowvar.arms import load_arm
+
+    config = EmulatorConfig(
+        port=0, discovery=False, plant="ideal", arm="kr10_r1100_2",
+        program=str(KRL_DIR / "kvp_jog.src"), config_files=(KRL_DIR / "kvp_jog_config.dat",),
+    )  # fmt: skip
+    emu = EmulatorThread(config).start()
+    backend = KvpArm(load_arm("kr10_r1100_2"), "127.0.0.1", emu.port)
+    try:
+        await backend.start()  # raises BackendError for a robot that is not the arm
+    finally:
+        await backend.close()
+        emu.stop()
