@@ -29,9 +29,12 @@ from __future__ import annotations
 import math
 import sys
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+
+from .params import FloatArray, dh_matrix
 
 if TYPE_CHECKING:
     from pyopenshowvar.arms import Arm
@@ -78,12 +81,15 @@ friction_fraction = 0.20
 """
 
 
+@dataclass(frozen=True, eq=False)
 class LinkEstimate:
     """One link of the physical robot: mass (kg), centre of mass (mm, base frame at the
     all-zero pose), inertia tensor about it (kg·m², base axes) and where they come from."""
 
-    def __init__(self, mass: float, com: np.ndarray, tensor: np.ndarray, how: str) -> None:
-        self.mass, self.com, self.tensor, self.how = mass, com, tensor, how
+    mass: float
+    com: FloatArray
+    tensor: FloatArray
+    how: str
 
 
 def _inertials_at_zero(arm: Arm) -> list[LinkEstimate] | None:
@@ -133,7 +139,7 @@ def _num(v: float) -> str:
     return repr(round(float(v), 10) + 0.0)
 
 
-def _row(values: Sequence[float] | np.ndarray) -> str:
+def _row(values: Sequence[float] | FloatArray) -> str:
     return "[" + ", ".join(_num(v) for v in values) + "]"
 
 
@@ -152,8 +158,6 @@ def plant_file_text(arm: Arm) -> str:
     links = estimate_links(arm)
     frames = np.zeros((6, 4, 4))
     acc = np.eye(4)
-    from .params import dh_matrix
-
     for j in range(6):
         frames[j] = acc
         acc = acc @ dh_matrix(model.a[j], model.alpha[j], model.d[j], model.offset[j])
