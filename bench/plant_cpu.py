@@ -7,8 +7,12 @@ two poses), each without a reader and with one that reads ``$AXIS_ACT`` and
 ``$TORQUE_AXIS_ACT[]`` every cycle (in process, so the TCP server's cost is not counted; the
 dynamic plant computes its readings only when they are read). The targets are the emulator's:
 ≤ 1 % of a core per robot at rest and ≤ 5 % moving (50 robots in one process).
+``--robot NAME|FILE`` simulates that KUKA arm instead of the KR 6 (its own plant model file,
+limits and speeds, as ``kukavarproxy-emu --robot``; the two poses are clipped 5° inside its
+limits); ``--plant`` runs one plant only.
 
-    .venv/bin/python bench/plant_cpu.py [--quick] [--seconds 4] [--json PATH]
+    .venv/bin/python bench/plant_cpu.py [--quick] [--seconds 4] [--robot kr16_r2010_2]
+        [--plant dynamic] [--json PATH]
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import Row, base_parser, print_rows, write_json
 
 from kukavarproxy_emu.motion import Robot
+from kukavarproxy_emu.robots import resolve_robot
 from kukavarproxy_emu.store import VariableStore
 
 POSES = (
@@ -34,11 +39,20 @@ POSES = (
 TARGETS = {"rest": 1.0, "moving": 5.0}
 
 
-async def cpu_percent(plant: str, moving: bool, reader: bool, seconds: float) -> float:
-    """CPU % of one robot; ``plant = "clock"``: the IPO clock alone (an empty cycle)."""
-    store = VariableStore()
+async def cpu_percent(
+    plant: str, moving: bool, reader: bool, seconds: float, arm: str = ""
+) -> float:
+    """CPU % of one robot (the arm ``arm``, "" = the KR 6); ``plant = "clock"``: the IPO clock
+    alone (an empty cycle)."""
+    spec = resolve_robot(arm)
+    store = VariableStore(overrides=spec.sysvar_overrides())
     kind = "ideal" if plant == "clock" else plant
-    robot = Robot(store, program="none", sps=None, plant=kind, seed=1)
+    robot = Robot(
+        store, program="none", sps=None, plant=kind, seed=1, model=spec.model,
+        machine=spec.machine, plant_params=spec.plant_params,
+    )  # fmt: skip
+    lo, hi = spec.model.lower + 5.0, spec.model.upper - 5.0
+    poses = tuple(np.clip(p, lo, hi) for p in POSES)
     kernel, tick = robot.kernel, robot.tick
     turn = [0]
 
@@ -46,7 +60,7 @@ async def cpu_percent(plant: str, moving: bool, reader: bool, seconds: float) ->
         if plant == "clock":
             return
         if moving and not kernel.moving:
-            kernel.ptp(POSES[turn[0] % 2])
+            kernel.ptp(poses[turn[0] % 2])
             turn[0] += 1
         tick()
         if reader:
@@ -63,8 +77,10 @@ async def cpu_percent(plant: str, moving: bool, reader: bool, seconds: float) ->
     return 100.0 * cpu / wall
 
 
-async def main_async(seconds: float) -> list[Row]:
-    base = await cpu_percent("clock", False, False, seconds)
+async def main_async(
+    seconds: float, arm: str = "", plants: tuple[str, ...] = ("ideal", "dynamic")
+) -> list[Row]:
+    base = await cpu_percent("clock", False, False, seconds, arm)
     rows = [
         Row(
             "asyncio loop + 12 ms IPO clock alone (empty cycle)",
@@ -77,9 +93,9 @@ async def main_async(seconds: float) -> list[Row]:
         )
     ]
     for state in ("rest", "moving"):
-        for plant in ("ideal", "dynamic"):
+        for plant in plants:
             for reader in (False, True):
-                pct = await cpu_percent(plant, state == "moving", reader, seconds)
+                pct = await cpu_percent(plant, state == "moving", reader, seconds, arm)
                 who = "a reader every cycle" if reader else "no reader"
                 rows.append(
                     Row(
@@ -99,11 +115,15 @@ async def main_async(seconds: float) -> list[Row]:
 def main() -> None:
     ap = base_parser(__doc__)
     ap.add_argument("--seconds", type=float, default=4.0, help="wall seconds per scenario")
+    ap.add_argument("--robot", default="", help="KUKA arm: catalogue name or file (default KR 6)")
+    ap.add_argument("--plant", choices=("ideal", "dynamic", "both"), default="both")
     args = ap.parse_args()
     seconds = 0.2 if args.quick else args.seconds
-    rows = asyncio.run(main_async(seconds))
-    print_rows("CPU of one simulated robot (% of one core, real time, 12 ms IPO)", rows)
-    write_json(args.json, "plant", rows, {})
+    plants = ("ideal", "dynamic") if args.plant == "both" else (args.plant,)
+    rows = asyncio.run(main_async(seconds, args.robot, plants))
+    arm = resolve_robot(args.robot).model.name
+    print_rows(f"CPU of one simulated {arm} (% of one core, real time, 12 ms IPO)", rows)
+    write_json(args.json, "plant", rows, {"robot": args.robot or "kr6_r900_sixx"})
 
 
 if __name__ == "__main__":

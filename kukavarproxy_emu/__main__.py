@@ -139,6 +139,16 @@ def build_parser(prog: str = "kukavarproxy-emu") -> argparse.ArgumentParser:
     )
     rob = parser.add_argument_group("simulated robot")
     rob.add_argument(
+        "--robot",
+        dest="arm",
+        default="",
+        metavar="NAME|FILE",
+        help="which KUKA six-axis arm: a catalogue name (kvp arms list: kr6_r900_sixx,"
+        " kr10_r1100_2, kr16_r2010_2, kr210_r2700_2, kr560_r3100_2) or an arm file (.toml,"
+        " .urdf); default the KR 6 R900 sixx. Its $MODEL_NAME[], limits, speeds and plant"
+        " follow it; arms a KRC does not drive over KUKAVARPROXY are refused",
+    )
+    rob.add_argument(
         "--program",
         default="",
         metavar="NAME|PROG.src",
@@ -236,6 +246,7 @@ def config_from_args(args: argparse.Namespace) -> EmulatorConfig:
         discovery=args.discovery,
         faults=tuple(Fault.parse(spec) for spec in args.fault),
         robot=args.robot,
+        arm=args.arm,
         program=args.program,
         sps=args.sps,
         speed=args.speed,

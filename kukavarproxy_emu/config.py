@@ -97,6 +97,10 @@ class EmulatorConfig:
     max_pending: int = 128
     #: Simulate the robot (motion kernel + program + SPS); False = static variables only.
     robot: bool = True
+    #: Which KUKA arm (``--robot``): a catalogue name or an arm file; "" = the KR 6 R900
+    #: sixx. Its identity, limits and start-up pose are in the variables even without
+    #: ``robot`` (see kukavarproxy_emu.robots).
+    arm: str = ""
     #: Robot program: a shipped name (see docs/emulator-robot.md) or a ``.src`` path (docs/krl.md);
     #: "" = the proxy's default: ``follow`` for KVP, ``none`` for C3 Bridge (whose clients
     #: select and start their own programs).
@@ -178,6 +182,11 @@ class EmulatorConfig:
                 raise ValueError("--quirks reproduce KUKAVARPROXY bugs; C3 Bridge has none")
             object.__setattr__(self, "strict", True)  # C3's failure tail on types 0/1
         object.__setattr__(self, "config_files", tuple(Path(p) for p in self.config_files))
+        object.__setattr__(self, "arm", str(self.arm).strip())
+        if self.arm:
+            from .robots import resolve_robot  # numpy: only for another arm than the KR 6
+
+            resolve_robot(self.arm)  # fail early, with one line, on an arm it cannot be
         resolve_profile(self.latency)  # fail early on a bad profile name
 
     # The proxy-dependent defaults are resolved on use, not stored, so that

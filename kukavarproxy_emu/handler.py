@@ -103,8 +103,14 @@ def _pack_words(tokens: list[str]) -> bytes | None:
 
 
 def build_store(config: EmulatorConfig) -> VariableStore:
-    """The default KRC4 variables plus the globals of ``config.config_files`` and ``dat_text``."""
-    store = VariableStore()
+    """The default KRC4 variables (of ``config.arm``) plus the globals of
+    ``config.config_files`` and ``dat_text``."""
+    overrides = None
+    if config.arm:
+        from .robots import resolve_robot  # numpy: only for another arm than the KR 6
+
+        overrides = resolve_robot(config.arm).sysvar_overrides()
+    store = VariableStore(overrides=overrides)
     for path in config.config_files:
         store.load_dat(path.read_text(encoding="latin-1"))
     if config.dat_text:

@@ -627,10 +627,15 @@ class Emulator:
 
     def _start_robot(self) -> None:
         from .motion import Robot  # imported late: numpy kinematics only when a robot runs
+        from .robots import resolve_robot
 
         cfg = self.config
+        arm = resolve_robot(cfg.arm)
         self.robot = Robot(
             self.store,
+            model=arm.model,
+            machine=arm.machine,
+            plant_params=arm.plant_params if cfg.plant == "dynamic" else None,
             program=cfg.robot_program,
             sps=cfg.sps,
             ipo=cfg.ipo,

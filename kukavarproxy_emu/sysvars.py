@@ -8,7 +8,8 @@ a KR 6 R900 sixx standing at HOME (A1..A6 = 0, -90, 90, 0, 0, 0) on a KRC4 in ``
 Figures: the variables and their texts as captured from KRC4s in public clients, KUKA's KR AGILUS
 sixx limits (kroshu/kuka_robot_descriptions, ros-industrial/kuka_experimental), the holding
 torques of KUKA's KR 6 R900-2 masses at the HOME pose. Initial values can be replaced per name with
-``system_variables(overrides)``, e.g. ``{"$MODE_OP": "#T1"}`` for a teach-mode controller.
+``system_variables(overrides)``, e.g. ``{"$MODE_OP": "#T1"}`` for a teach-mode controller;
+another arm (``--robot``) replaces the arm's own ones (:meth:`~.robots.RobotSpec.sysvar_overrides`).
 """
 
 from __future__ import annotations

@@ -45,15 +45,21 @@ class Cell:
         self.gw, self.emus = gw, emus
 
 
-def _emu(port: int = 0, dat: str | None = None) -> Emulator:
+def _emu(port: int = 0, dat: str | None = None, arm: str = "") -> Emulator:
     # the ideal plant: exact set-points and the cheapest robot (the gateway is under test here)
-    config = EmulatorConfig(port=port, discovery=False, idle_timeout=0, plant="ideal", dat_text=dat)
+    config = EmulatorConfig(
+        port=port, discovery=False, idle_timeout=0, plant="ideal", dat_text=dat, arm=arm
+    )
     return Emulator(config)
+
+
+#: r3 is a KR 16 R2010-2: its MotionDevice follows its own $MODEL_NAME[]
+ARMS = {"r3": "kr16_r2010_2"}
 
 
 @pytest_asyncio.fixture(scope="module", loop_scope="module")
 async def cell() -> AsyncIterator[Cell]:
-    emus = {name: await _emu().start() for name in ROBOTS}
+    emus = {name: await _emu(arm=ARMS.get(name, "")).start() for name in ROBOTS}
     emus["r4"] = await _emu(dat=SNAPSHOT_DAT).start()
     snapshot = {"variable": "GW_SNAP", "members": {"$AXIS_ACT": "AX", "$ov_pro": "OV"}}
     config = parse_cell(
@@ -169,6 +175,33 @@ class _Changes:
     def datachange_notification(self, node: Any, val: Any, data: Any) -> None:
         if isinstance(val, float):
             self.values.setdefault(node.nodeid.Identifier, []).append(val)
+
+
+async def test_each_motion_device_shows_its_own_arm(cell: Cell) -> None:
+    """Model and axis ranges from each robot's $MODEL_NAME[] and the catalogue: r1 a KR 6,
+    r3 a KR 16 R2010-2 (A2 -185..65 deg against the KR 6's -190..45)."""
+    async with ua_client(cell.gw) as (client, ours, _rob):
+
+        async def arm_of(robot: str) -> tuple[str, list[tuple[float, float]]]:
+            path = f"MotionDevices.{robot}"
+            model = await client.get_node(node_id(ours, f"{path}.Model")).read_value()
+            ranges = []
+            for axis in ("A1", "A2"):
+                node = node_id(ours, f"{path}.Axes.{axis}.ParameterSet.ActualPosition.EURange")
+                value = await client.get_node(node).read_value()
+                ranges.append((value.Low, value.High))
+            return model.Text, ranges
+
+        async def known() -> bool:
+            return bool((await arm_of("r1"))[0] and (await arm_of("r3"))[0])
+
+        await wait_for(known)
+        assert await arm_of("r1") == ("KR6R900SIXX C4SR FLR", [(-170.0, 170.0), (-190.0, 45.0)])
+        model, ranges = await arm_of("r3")
+        assert model == "KR16R2010-2 C4 FLR"
+        assert ranges == [pytest.approx((-185.0, 185.0)), pytest.approx((-185.0, 65.0))]
+    poller = cell.gw.pollers["r3"]
+    assert poller.max_speed == pytest.approx((200.0, 175.0, 190.0, 430.0, 430.0, 630.0))
 
 
 async def test_subscribed_client_sees_three_robots_move(cell: Cell) -> None:

@@ -49,6 +49,7 @@ from pyopenshowvar_apps.common import (
     check_port,
     check_seconds,
     plant_choice,
+    robot_choice,
     stop_embedded_emulator,
     to_jsonable,
 )
@@ -69,7 +70,7 @@ __all__ = [
 ]
 
 #: The global options that take a value, and the global flags.
-GLOBAL_VALUED = frozenset({"-H", "--host", "-p", "--port", "-t", "--timeout", "--plant"})
+GLOBAL_VALUED = frozenset({"-H", "--host", "-p", "--port", "-t", "--timeout", "--plant", "--robot"})
 GLOBAL_FLAGS = frozenset({"--emulate"})
 
 
@@ -125,7 +126,8 @@ def hoist_global_options(
 
 
 GLOBAL_EPILOG = (
-    "Global options (-H/--host, -p/--port, -t/--timeout, --emulate, --plant) may come before or "
+    "Global options (-H/--host, -p/--port, -t/--timeout, --emulate, --plant, --robot) may come"
+    " before or "
     "after the command name; see kvp --help."
 )
 
@@ -243,9 +245,21 @@ def _global(
             callback=plant_choice,
         ),
     ] = "dynamic",
+    robot: Annotated[
+        str,
+        typer.Option(
+            "--robot",
+            metavar="NAME|FILE",
+            help="Which KUKA arm: the embedded emulator's (--emulate; default the KR 6 R900"
+            " sixx), and the one the web pad, monitor and gateway draw (default: the one the"
+            " robot's $MODEL_NAME[] names). A catalogue name (kvp arms list) or an arm file.",
+            callback=robot_choice,
+        ),
+    ] = "",
 ) -> None:
     Opts.reset(host, port, timeout, emulate)
     Opts.plant = plant
+    Opts.robot = robot
     ctx.call_on_close(stop_embedded_emulator)
 
 

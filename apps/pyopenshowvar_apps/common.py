@@ -86,6 +86,9 @@ class Opts:
     emulator: Any = None
     #: The embedded emulator's plant (``--plant``): "dynamic" or "ideal".
     plant = "dynamic"
+    #: ``--robot NAME|FILE``: the embedded emulator's arm, and the arm the views draw
+    #: instead of the one ``$MODEL_NAME[]`` names ("" = the connected robot's own).
+    robot = ""
     #: Undoes the quieter log of the embedded emulator (see ``_quiet_emulator_log``).
     log_restore: Callable[[], None] | None = None
 
@@ -111,6 +114,29 @@ def plant_choice(value: str) -> str:
     if value not in ("dynamic", "ideal"):
         raise typer.BadParameter(f"{value!r} is not one of 'dynamic', 'ideal'")
     return value
+
+
+def robot_choice(value: str) -> str:
+    """Validate a ``--robot`` option (typer callback): a KUKA six-axis arm the emulator can
+    be and the views can draw (a catalogue name or an arm file); "" passes through."""
+    if not value:
+        return value
+    from kukavarproxy_emu.robots import resolve_robot
+
+    try:
+        resolve_robot(value)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc).removeprefix(f"--robot {value}: ")) from None
+    return value
+
+
+def robot_arm() -> Any:
+    """The :class:`~pyopenshowvar.arms.Arm` of ``--robot``, None when not given."""
+    if not Opts.robot:
+        return None
+    from pyopenshowvar.arms import load_arm
+
+    return load_arm(Opts.robot)
 
 
 def calibration_choice(value: str | None) -> str | None:
@@ -202,6 +228,7 @@ def start_embedded_emulator(
         udp_port=0,
         udp_reply_port=0,
         plant=Opts.plant,
+        arm=Opts.robot,
         **extra,
     )
     _quiet_emulator_log()

@@ -31,7 +31,14 @@ import typer
 from rich.console import Console
 
 from pyopenshowvar_apps.casestudies.common import CaseResult, output_dir, summary_table
-from pyopenshowvar_apps.common import calibration_option, calibration_seed, plant_choice
+from pyopenshowvar_apps.common import (
+    EXIT_USAGE,
+    Opts,
+    calibration_option,
+    calibration_seed,
+    fail,
+    plant_choice,
+)
 
 __all__ = ["demo", "run_demo"]
 
@@ -297,6 +304,14 @@ def demo(
     ] = None,
 ) -> None:
     """Run every case study against an embedded emulator and print ours vs the thesis."""
+    if Opts.robot and Opts.robot.strip().lower() not in ("kr6_r900_sixx", "kr6-r900-sixx"):
+        # the case studies are the thesis' KR 6 cells (their paths, loads and walls are sized
+        # for it): running them on another arm would not be the thesis' experiment
+        fail(
+            EXIT_USAGE,
+            "demo runs the thesis' case studies on the KR 6 R900 sixx; --robot"
+            f" {Opts.robot} does not apply (use kvp --emulate --robot {Opts.robot} <command>)",
+        )
     if quick and speed == 1.0:
         speed = 4.0
     calibration = calibration_seed(calibration_error, default=seed)

@@ -79,6 +79,7 @@ def monitor(
     if not 0 < hz <= 50:
         fail(EXIT_USAGE, f"--hz must be in (0, 50], got {hz:g}")
     host, port = Opts.endpoint()
+    from pyopenshowvar_apps.armpick import given_arm
     from pyopenshowvar_apps.monitor.app import MonitorApp
     from pyopenshowvar_apps.monitor.watchlist import default_watch_file
 
@@ -90,5 +91,6 @@ def monitor(
         watch_file=watch_file or default_watch_file(),
         emulated=Opts.emulator is not None,
         stop_window=stop_window,
+        arm=given_arm(Opts.robot) if Opts.robot else None,
     )
     app.run()

@@ -97,10 +97,13 @@ class ControllerDynamics:
         self.use_load(None)
 
     @classmethod
-    def for_model(cls, model: RobotModel) -> ControllerDynamics | None:
-        """The model of ``model`` if machine data exist for it and it has torque limits."""
+    def for_model(
+        cls, model: RobotModel, machine: MachineData | None = None
+    ) -> ControllerDynamics | None:
+        """The model of ``model`` if machine data exist for it (``machine``, else its file by
+        model name) and it has torque limits."""
         path = MACHINE_DATA.get(model.name)
-        if path is None or not np.all(np.isfinite(model.max_torque)):
+        if (path is None and machine is None) or not np.all(np.isfinite(model.max_torque)):
             log.debug("no dynamic model for %s: accelerations are not adapted", model.name)
             return None
         try:  # the ideal plant runs without the [emulator] extra; so does its planner
@@ -108,7 +111,10 @@ class ControllerDynamics:
         except ImportError:
             log.warning("mujoco is not installed: accelerations are not adapted to $LOAD")
             return None
-        return cls(model, load_machine_data(path))
+        if machine is None:
+            assert path is not None
+            machine = load_machine_data(path)
+        return cls(model, machine)
 
     def use_load(self, value: object) -> None:
         """Plan with the ``$LOAD`` value ``value`` (rebuilt only when it changed)."""
@@ -127,6 +133,18 @@ class ControllerDynamics:
             if self._mj is None:
                 raise
         self._data = mujoco.MjData(self._mj)
+
+    def diag_inertia(self, q: FloatArray) -> FloatArray:
+        """The diagonal of the mass matrix at the axes ``q`` (deg), kg·m² (motor inertia
+        included): what each axis alone feels."""
+        import mujoco
+
+        m, d = self._mj, self._data
+        d.qpos[:] = np.radians(q)
+        mujoco.mj_forward(m, d)
+        full = np.zeros((m.nv, m.nv))
+        mujoco.mj_fullM(m, d, full)
+        return np.asarray(np.diag(full), dtype=np.float64)
 
     def terms(self, q: FloatArray, qp: FloatArray, qpp: FloatArray) -> tuple[FloatArray, ...]:
         """``(A, B, G)`` at the axes ``q`` (deg) of a path with derivatives ``qp``, ``qpp``

@@ -45,7 +45,7 @@ from pyopenshowvar.kinematics import (
 from pyopenshowvar.krl import Struct
 
 from ..store import VariableStore
-from .dynamics import ControllerDynamics
+from .dynamics import ControllerDynamics, MachineData
 from .path import LinGeometry, PathLimits, PathRefused, joint_path, leave_wrist_singularity
 from .profiles import FloatArray, Profile
 from .publish import Publisher
@@ -147,18 +147,25 @@ class MotionKernel(Publisher):
         ipo: float = 0.012,
         noise: float = 0.0,
         seed: int | None = None,
-        inertia: Sequence[float] = DEFAULT_INERTIA,
+        inertia: Sequence[float] | None = None,
+        machine: MachineData | None = None,
     ) -> None:
         self.store = store
         self.model = model
         self.ipo = ipo
         #: Standard deviation (deg) of the measurement noise on $AXIS_ACT_MEAS (0 = none).
         self.noise = noise
-        self.inertia = np.asarray(inertia, dtype=np.float64)
         self._rng = np.random.default_rng(seed)
         #: The controller's dynamic model (accelerations adapted to $LOAD); None without
         #: machine data for ``model``.
-        self.dynamics = ControllerDynamics.for_model(model)
+        self.dynamics = ControllerDynamics.for_model(model, machine)
+        dyn = self.dynamics
+        if inertia is not None:
+            self.inertia = np.asarray(inertia, dtype=np.float64)
+        elif machine is not None and dyn is not None:  # the ideal plant's inertia term
+            self.inertia = dyn.diag_inertia(model.home)
+        else:
+            self.inertia = np.asarray(DEFAULT_INERTIA, dtype=np.float64)
         q0 = axes_of(store.get("$AXIS_ACT"), "$AXIS_ACT")
         self.q = q0.copy()
         self.qd = np.zeros(6)  # deg/s

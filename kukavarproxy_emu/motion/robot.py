@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -36,6 +36,8 @@ from .programs import Idle, Program, make_program
 
 if TYPE_CHECKING:
     from ..krl.executor import KrlSubmit
+    from ..plant.params import PlantParams
+    from .dynamics import MachineData
 
 __all__ = ["MESSAGE_LENGTH", "Robot"]
 
@@ -49,7 +51,10 @@ COAST = 8
 
 
 class Robot:
-    """One simulated KR 6 R900 sixx: ``emu.robot`` while an emulator runs with ``robot=True``."""
+    """One simulated KUKA arm (``model``; the KR 6 R900 sixx by default): ``emu.robot`` while
+    an emulator runs with ``robot=True``. ``machine``: the controller's machine data for a
+    model without its own file; ``plant_params``: the physical robot's parameters (default:
+    the KR 6's model file), called only when the plant is dynamic."""
 
     def __init__(
         self,
@@ -68,10 +73,14 @@ class Robot:
         torque_noise: float | None = None,
         obstacles: Sequence[Obstacle] = (),
         coast: int = COAST,
+        machine: MachineData | None = None,
+        plant_params: Callable[[], PlantParams] | None = None,
     ) -> None:
         self.store = store
         ideal_noise = (noise or 0.0) if plant == "ideal" else 0.0
-        self.kernel = MotionKernel(store, model, ipo=ipo, noise=ideal_noise, seed=seed)
+        self.kernel = MotionKernel(
+            store, model, ipo=ipo, noise=ideal_noise, seed=seed, machine=machine
+        )
         self.kernel.on_fault = self.fault
         #: The physical robot (``plant="dynamic"``), None for the ideal plant: see
         #: :mod:`kukavarproxy_emu.plant`; ``robot.plant.truth`` is the ground truth.
@@ -85,6 +94,7 @@ class Robot:
             torque_noise=torque_noise,
             seed=seed,
             obstacles=obstacles,
+            params=plant_params() if plant_params is not None else None,
         )
         self.kernel.plant = self.plant
         if self.plant is not None:

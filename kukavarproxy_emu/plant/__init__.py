@@ -6,7 +6,8 @@ into what a KRC4 measures and publishes:
 * ``ideal`` — no plant object: the measured axes are the set-point and ``$TORQUE_AXIS_ACT`` is
   the kinematics package's statics (exact values, for tests).
 * ``dynamic`` — :class:`~.dynamic.DynamicPlant`: a MuJoCo rigid-body model of the KR 6 R900
-  sixx (inertia, friction, motor inertia, payload) driven by joint servos, with sensor noise,
+  sixx, or of the arm ``--robot`` names (its own model file, :mod:`kukavarproxy_emu.robots`)
+  (inertia, friction, motor inertia, payload) driven by joint servos, with sensor noise,
   external wrenches and contact with :class:`Obstacle` objects, optionally with a calibration
   error (the physical robot differs from the nominal model).
 
@@ -32,6 +33,7 @@ if TYPE_CHECKING:  # the config imports this package: keep it light
 
     from ..store import VariableStore
     from .dynamic import DynamicPlant, Truth
+    from .params import PlantParams
 
 __all__ = ["PLANTS", "Obstacle", "Plant", "make_plant"]
 
@@ -68,6 +70,7 @@ def make_plant(
     torque_noise: float | None = None,
     seed: int | None = None,
     obstacles: Sequence[Obstacle] = (),
+    params: PlantParams | None = None,
 ) -> DynamicPlant | None:
     """The plant ``kind`` (None for ``ideal``); raises ``ValueError`` for an unknown kind."""
     if kind == "ideal":
@@ -90,5 +93,6 @@ def make_plant(
         torque_noise=torque_noise,
         seed=seed,
         obstacles=obstacles,
+        params=params,
     )
     return plant

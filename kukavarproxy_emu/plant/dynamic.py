@@ -101,7 +101,8 @@ class StepRecord:
 
 
 class DynamicPlant(Sensors):
-    """The physical KR 6 R900 sixx behind one emulated controller."""
+    """The physical arm behind one emulated controller (``params``: its model file; default
+    the KR 6 R900 sixx's)."""
 
     kind = "dynamic"
 

@@ -28,6 +28,7 @@ __all__ = [
     "dh_matrix",
     "load_params",
     "make_bodies",
+    "params_of",
     "with_calibration_error",
 ]
 
@@ -115,12 +116,14 @@ def make_bodies(
     coulomb: FloatArray | None = None,
     static: FloatArray | None = None,
     viscous: FloatArray | None = None,
+    principal_axes: FloatArray | None = None,
 ) -> Bodies:
     """:class:`Bodies` from per-link data in the base frame at the all-zero pose.
 
     ``dh`` rows are ``(a, alpha, d, theta offset)``; ``com_base`` the centres of mass (mm) and
-    ``inertia`` the principal moments along the base axes, both at the all-zero pose; they move
-    into the link body frames here. Friction defaults to none.
+    ``inertia`` the principal moments along the base axes (or along ``principal_axes``, per
+    link a 3×3 of column vectors in the base frame), all at the all-zero pose; they move into
+    the link body frames here. Friction defaults to none.
     """
     zeros = np.zeros(6)
     bodies = Bodies(
@@ -144,6 +147,8 @@ def make_bodies(
     rot = frames[:, :3, :3]
     com = np.einsum("jki,jk->ji", rot, np.asarray(com_base) - frames[:, :3, 3])  # Rᵀ (c − o)
     axes = np.transpose(rot, (0, 2, 1))  # base axes seen from the link frame: Rᵀ
+    if principal_axes is not None:
+        axes = axes @ np.asarray(principal_axes, dtype=np.float64)  # Rᵀ·P
     return replace(bodies, com=com, inertia_axes=axes)
 
 
@@ -192,7 +197,8 @@ def _bodies_of(links: list[dict[str, Any]], flange: list[float], path: object) -
         return arr
 
     mass, rotor, gear = col("mass"), col("rotor"), col("gear")
-    inertia, sign, max_torque = col("inertia", (6, 3)), col("sign"), col("max_torque")
+    inertia, axes = _inertia_of(links, path)
+    sign, max_torque = col("sign"), col("max_torque")
     coulomb, static, viscous = col("coulomb"), col("static"), col("viscous")
     if np.any(mass < 0) or np.any(inertia <= 0) or np.any(gear <= 0) or np.any(rotor < 0):
         raise ValueError(f"{path}: mass and rotor must be >= 0, inertia and gear > 0")
@@ -204,14 +210,38 @@ def _bodies_of(links: list[dict[str, Any]], flange: list[float], path: object) -
         col("dh", (6, 4)), sign, _frame(flange),
         mass=mass, com_base=col("origin", (6, 3)) + col("com", (6, 3)), inertia=inertia,
         armature=rotor * gear**2, max_torque=max_torque, coulomb=coulomb, static=static,
-        viscous=viscous,
+        viscous=viscous, principal_axes=axes,
     )  # fmt: skip
+
+
+def _inertia_of(links: list[dict[str, Any]], path: object) -> tuple[FloatArray, FloatArray]:
+    """Per link the principal moments (kg·m²) and their axes (columns, base frame).
+
+    ``inertia`` is 3 principal moments along the base axes, or a full tensor about the centre
+    of mass in base axes, ``[ixx, ixy, ixz, iyy, iyz, izz]`` (what a URDF's inertial becomes
+    at the all-zero pose), diagonalised here.
+    """
+    moments, axes = np.zeros((6, 3)), np.zeros((6, 3, 3))
+    for j, link in enumerate(links):
+        row = np.array(link["inertia"], dtype=np.float64).ravel()
+        if not np.all(np.isfinite(row)) or row.shape not in ((3,), (6,)):
+            raise ValueError(f"{path}: [[link]] inertia needs 3 or 6 finite values")
+        if row.shape == (3,):
+            moments[j], axes[j] = row, np.eye(3)
+            continue
+        xx, xy, xz, yy, yz, zz = row
+        moments[j], axes[j] = np.linalg.eigh(np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]))
+    return moments, axes
 
 
 def load_params(path: str | Path = DEFAULT_PARAMS_FILE) -> PlantParams:
     """Read a plant model file; raises ``ValueError`` for a missing or bad entry."""
     with open(path, "rb") as fh:
-        data = tomllib.load(fh)
+        return params_of(tomllib.load(fh), path)
+
+
+def params_of(data: dict[str, Any], path: str | Path = "<plant model>") -> PlantParams:
+    """:class:`PlantParams` of a parsed plant model file (``path`` names it in errors)."""
     try:
         servo, noise, cal = data["servo"], data["noise"], data["calibration"]
         fric = data["friction"]

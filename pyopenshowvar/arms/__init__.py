@@ -10,7 +10,7 @@ degrees at the API, as everywhere in the toolkit. See docs/arms.md.
 
 from __future__ import annotations
 
-from .catalogue import catalogue, load_arm
+from .catalogue import arm_for_model_name, catalogue, load_arm
 from .errors import ArmFileError, UnknownArmError
 from .files import arm_from_dict, load_toml
 from .ik import IKResult, solve
@@ -26,6 +26,7 @@ __all__ = [
     "JointType",
     "Source",
     "UnknownArmError",
+    "arm_for_model_name",
     "arm_from_dict",
     "catalogue",
     "derive_robot_model",

@@ -15,7 +15,7 @@ from .errors import UnknownArmError
 from .files import load_toml
 from .model import Arm
 
-__all__ = ["catalogue", "load_arm"]
+__all__ = ["arm_for_model_name", "catalogue", "load_arm"]
 
 _DATA = "data"
 
@@ -54,3 +54,27 @@ def load_arm(name_or_path: str | Path) -> Arm:
     raise UnknownArmError(
         f"no arm {text!r}: not in the catalogue ({', '.join(catalogue())}) and no such file"
     )
+
+
+def _arm_type(model_name: str) -> str:
+    """The arm type of a ``$MODEL_NAME[]`` text: its first word, without quotes and ``#``,
+    upper case (``'"#KR16R2010-2 C4 FLR"'`` -> ``KR16R2010-2``); the rest names the
+    controller and variant, which do not change the arm's geometry."""
+    words = model_name.strip().strip('"').strip().lstrip("#").split()
+    return words[0].upper() if words else ""
+
+
+def arm_for_model_name(model_name: str) -> Arm | None:
+    """The catalogue arm a controller's ``$MODEL_NAME[]`` names, or None if none does.
+
+    Compared by arm type (the first word): a controller answering ``#KR6R900SIXX C4SR FLR``
+    or ``#KR6R900SIXX`` is the KR 6 R900 sixx.
+    """
+    wanted = _arm_type(model_name)
+    if not wanted:
+        return None
+    for name in catalogue():
+        arm = _catalogue_arm(name)
+        if arm.model_name and _arm_type(arm.model_name) == wanted:
+            return arm
+    return None

@@ -111,11 +111,14 @@ class RobotConfig:
     #: move the robot or change how it moves: listing one in ``writable`` needs this set too.
     allow_motion_writes: bool = False
     #: Maximum axis speeds A1..A6 in deg/s, which $VEL_AXIS_ACT's percent refers to; None takes
-    #: them from the KR 6 R900 sixx model of pyopenshowvar.kinematics.
+    #: them from the robot's arm (``arm``, else the catalogue arm its $MODEL_NAME[] names).
     max_axis_speed: tuple[float, ...] | None = None
     snapshots: tuple[SnapshotGroup, ...] = ()
     #: A reply longer than this is not parsed: the robot is misbehaving (gateway/budget.py).
     max_value_chars: int = MAX_VALUE_CHARS
+    #: The arm (catalogue name or arm file) when $MODEL_NAME[] does not name a catalogue arm;
+    #: "" = the one $MODEL_NAME[] names (pyopenshowvar_apps.armpick).
+    arm: str = ""
 
     @property
     def exposed(self) -> tuple[str, ...]:
@@ -290,6 +293,7 @@ def _robot(raw: Any, index: int, where: str) -> RobotConfig:
         "max_axis_speed",
         "snapshot",
         "max_value_chars",
+        "arm",
     }
     _no_extra(r, allowed, what)
     name = _str(r.get("name"), f"{what}.name")
@@ -331,8 +335,16 @@ def _robot(raw: Any, index: int, where: str) -> RobotConfig:
     chars = r.get("max_value_chars", MAX_VALUE_CHARS)
     if not isinstance(chars, int) or isinstance(chars, bool) or not 256 <= chars <= 65535:
         raise CellError(f"{what}.max_value_chars must be an integer in 256..65535")
+    arm = _str(r.get("arm", ""), f"{what}.arm") if "arm" in r else ""
+    if arm:
+        from ..armpick import given_arm
+
+        try:
+            given_arm(arm)
+        except (LookupError, ValueError, OSError) as exc:
+            raise CellError(f"{what}.arm: {exc}") from None
     return RobotConfig(
-        name, host, port, poll_hz, timeout, variables, writable, motion, speeds, snaps, chars
+        name, host, port, poll_hz, timeout, variables, writable, motion, speeds, snaps, chars, arm
     )
 
 

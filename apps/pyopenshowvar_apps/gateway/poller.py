@@ -38,6 +38,7 @@ from pyopenshowvar import Client, KrlEnum, KvpError, Struct, UnknownVariableErro
 from pyopenshowvar.errors import KrlValueError
 from pyopenshowvar.krl.parse import parse_number_list, parse_number_struct
 
+from ..armpick import DEFAULT_CHOICE, choose_arm, given_arm
 from .budget import ValueTooLongError, WorkBudget
 from .cell import RobotConfig, SnapshotGroup, canonical
 from .live import LiveNode, Sink
@@ -48,6 +49,7 @@ from .mapping import (
     SLOW_VARIABLES,
     identity_values,
     poll_values,
+    text_of,
 )
 from .robotics import UNITS, CellNodes, RobotNodes
 
@@ -78,13 +80,18 @@ class RobotPoller:
         nodes: RobotNodes,
         cell: CellNodes,
         sink: Sink,
-        max_speed: Sequence[float],
+        max_speed: Sequence[float] | None = None,
         phase: float = 0.0,
     ) -> None:
         self.cfg, self.nodes, self.cell, self.sink = cfg, nodes, cell, sink
         #: where in each poll period this robot's polls fall, 0 <= phase < 1 (see _next_slot)
         self.phase = phase
-        self.max_speed = tuple(max_speed)
+        #: The arm drawn on the MotionDevice (its model, axis speeds and ranges): ``cfg.arm``,
+        #: else the one $MODEL_NAME[] names, chosen at each connection (see _identity).
+        self.given = given_arm(cfg.arm) if cfg.arm else None
+        self.arm = self.given or DEFAULT_CHOICE
+        self.fixed_speed = tuple(max_speed) if max_speed is not None else None
+        self.max_speed = self.fixed_speed or tuple(float(s) for s in self.arm.model.max_speed)
         self.client: Client | None = None
         self.connected = False
         self.polls = 0
@@ -205,6 +212,7 @@ class RobotPoller:
         values = {n: await self._parse_reply(n, r.text) for n, r in results.items() if r.ok}
         ident = identity_values(values)
         stamp = datetime.now(UTC)
+        await self._arm(text_of(values.get("$MODEL_NAME[]")), stamp)
         strings = {
             "product_code": ident["product_code"],
             "serial": ident["serial"],
@@ -234,6 +242,20 @@ class RobotPoller:
                 await self.sink.set(node, ua.LocalizedText(value), _V.LocalizedText, stamp)
         await self._static(stamp)
         return self.poll_names()
+
+    async def _arm(self, model_name: str, stamp: datetime) -> None:
+        """The robot's arm: axis speeds (for $VEL_AXIS_ACT's percent) and the axes' position
+        ranges (EURange of ActualPosition), of a known arm only."""
+        self.arm = choose_arm(model_name, self.given)
+        if self.fixed_speed is None:
+            self.max_speed = tuple(float(s) for s in self.arm.model.max_speed)
+        log.info("robot %s: %s (%s)", self.cfg.name, self.arm.model.name, self.arm.source)
+        if not self.arm.key:
+            return
+        model = self.arm.model
+        for i, node in enumerate(self.nodes.position_range):
+            value = ua.Range(Low=float(model.lower[i]), High=float(model.upper[i]))
+            await self.sink.set(node, value, _V.ExtensionObject, stamp)
 
     async def _static(self, stamp: datetime) -> None:
         """Values fixed by the model: category, motion profiles, units, task names."""

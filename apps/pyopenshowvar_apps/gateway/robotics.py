@@ -109,6 +109,8 @@ class RobotNodes:
     #: identity key ("manufacturer", "model", ...) -> the nodes showing it
     identity: dict[str, list[ua.NodeId]] = field(default_factory=dict)
     position: list[ua.NodeId] = field(default_factory=list)
+    #: EURange of each ActualPosition: the arm's axis range (deg)
+    position_range: list[ua.NodeId] = field(default_factory=list)
     speed: list[ua.NodeId] = field(default_factory=list)
     torque: list[ua.NodeId] = field(default_factory=list)
     current: list[ua.NodeId] = field(default_factory=list)
@@ -320,12 +322,17 @@ class RobotBuilder:
                 f"{path}.Axes.{axis}",
                 self._q(axis),
                 _rid(self.ns, "AxisType"),
-                optional=frozenset({"ParameterSet/ActualSpeed"}),
+                optional=frozenset(
+                    {"ParameterSet/ActualSpeed", "ParameterSet/ActualPosition/EURange"}
+                ),
             )
             nodes.identity.setdefault("motion_profile", []).append(
                 self._id(f"{path}.Axes.{axis}.MotionProfile")
             )
             nodes.position.append(self._id(f"{path}.Axes.{axis}.ParameterSet.ActualPosition"))
+            nodes.position_range.append(
+                self._id(f"{path}.Axes.{axis}.ParameterSet.ActualPosition.EURange")
+            )
             nodes.speed.append(self._id(f"{path}.Axes.{axis}.ParameterSet.ActualSpeed"))
             pt_path = f"{path}.PowerTrains.PowerTrain{i}"
             pt = await self._add(

@@ -127,14 +127,12 @@ class Gateway:
         self.nodes = await build_cell(server, inst, ns, cell.name)
         builder = RobotBuilder(server, inst, self.nodes)
         self.sink = Sink(server)
-        from pyopenshowvar.kinematics import KR6R900SIXX
-
         for index, robot in enumerate(cell.robots):
             nodes = await builder.build(robot.name, robot.exposed)
             self.robots[robot.name] = nodes
-            speeds = robot.max_axis_speed or tuple(float(s) for s in KR6R900SIXX.max_speed)
             phase = (index % POLL_SLOTS) / POLL_SLOTS
-            poller = RobotPoller(robot, nodes, self.nodes, self.sink, speeds, phase)
+            # speeds None: the arm's, known once $MODEL_NAME[] is read (poller._identity)
+            poller = RobotPoller(robot, nodes, self.nodes, self.sink, robot.max_axis_speed, phase)
             self.pollers[robot.name] = poller
             if robot.writable:
                 method_id = ua.NodeId(

@@ -30,6 +30,7 @@ from textual.widgets import DataTable, Footer, Static, TabbedContent, TabPane
 from textual.widgets.data_table import ColumnKey
 
 from pyopenshowvar import Client, KvpConnectionError, KvpError, KvpTimeoutError
+from pyopenshowvar_apps.armpick import ArmChoice
 from pyopenshowvar_apps.names import is_motion_variable
 from pyopenshowvar_apps.pretty import render_text
 from pyopenshowvar_apps.writecheck import STOP_WINDOW, check_literal, checked_write
@@ -83,12 +84,13 @@ class MonitorApp(App[None]):
         watch_file: Path | None = None,
         emulated: bool = False,
         stop_window: float = STOP_WINDOW,
+        arm: ArmChoice | None = None,
     ) -> None:
         super().__init__()
         self.stop_window = stop_window
         self.host, self.port, self.hz = host, port, hz
         self.client = Client(host, port, timeout=timeout, auto_reconnect=True, keepalive=None)
-        self.state = RobotState()
+        self.state = RobotState(given=arm)
         self.watchlist = WatchList.load(watch_file)
         self.emulated = emulated
         self.connected = False
@@ -120,7 +122,7 @@ class MonitorApp(App[None]):
         yield Footer()
 
     def on_mount(self) -> None:
-        self.query_one("#joints").border_title = "joints (deg) · limits · torque"
+        self.query_one("#joints").border_title = self.joints_title()
         self.query_one("#pose").border_title = "TCP pose $POS_ACT"
         self.query_one("#program").border_title = "program"
         self.query_one("#stats").border_title = "access time (this monitor)"
@@ -213,9 +215,23 @@ class MonitorApp(App[None]):
         status.update(self.status_text())
         status.set_class(not self.connected, "lost")
 
+    def joints_title(self) -> str:
+        """The joints panel's title: with the arm, and where its limits come from."""
+        title = "joints (deg) · limits · torque"
+        arm = self.state.arm
+        if arm is None:
+            return title
+        name = arm.model.name if arm.key else f"{arm.model.name}?"
+        limits = " (catalogue limits)" if self.state.limits_from == "catalogue" else ""
+        return f"{title} · {name}{limits}"
+
     def _refresh_view(self) -> None:
         """Redraw the status line and the panels of the visible tab only (cheap at 10 Hz)."""
         self._refresh_status()
+        joints = self.query_one("#joints")
+        title = self.joints_title()
+        if joints.border_title != title:
+            joints.border_title = title
         active = self.query_one(TabbedContent).active
         if active == "robot":
             self.query_one(JointsPanel).refresh_from(self.state)

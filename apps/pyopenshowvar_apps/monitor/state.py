@@ -2,8 +2,10 @@
 
 Every refresh reads all panel variables and the watch list in ONE pipelined ``read_many``;
 the software limits are constant and are read only until they are known (again after a
-reconnect). A variable that cannot be read or parsed leaves its previous value in place, so a
-controller without ``$TORQUE_AXIS_ACT`` still shows joints and pose.
+reconnect), with ``$MODEL_NAME[]``, which names the arm (:mod:`..armpick`): its catalogue
+limits stand in where the controller does not answer the software limits, and the panel
+names the arm. A variable that cannot be read or parsed leaves its previous value in place, so
+a controller without ``$TORQUE_AXIS_ACT`` still shows joints and pose.
 """
 
 from __future__ import annotations
@@ -15,6 +17,8 @@ from typing import Any
 
 from pyopenshowvar import ReadResult, Struct, parse_value
 from pyopenshowvar.errors import KrlValueError
+
+from ..armpick import ArmChoice, choose_arm
 
 AXES = ("A1", "A2", "A3", "A4", "A5", "A6")
 POSE = ("X", "Y", "Z", "A", "B", "C", "S", "T")
@@ -31,7 +35,7 @@ PANEL_VARIABLES = (
     "$VEL_ACT",
 )
 #: Read until known (constant while connected).
-LIMIT_VARIABLES = ("$SOFTN_END[]", "$SOFTP_END[]")
+LIMIT_VARIABLES = ("$SOFTN_END[]", "$SOFTP_END[]", "$MODEL_NAME[]")
 #: Samples kept for the plots (20 s at 10 Hz).
 HISTORY = 200
 
@@ -69,6 +73,12 @@ class RobotState:
     torques: list[float] = field(default_factory=lambda: [math.nan] * 6)
     lower: list[float] | None = None
     upper: list[float] | None = None
+    #: The arm given by the user (``--robot``); None: the one ``$MODEL_NAME[]`` names.
+    given: ArmChoice | None = None
+    #: The arm the panel shows (None until ``$MODEL_NAME[]`` was read, or ``given``).
+    arm: ArmChoice | None = None
+    #: Where :attr:`lower` / :attr:`upper` come from: "controller" or "catalogue".
+    limits_from: str = ""
     pose: dict[str, float | int] = field(default_factory=dict)
     override: int | None = None
     program_state: str = ""
@@ -95,6 +105,7 @@ class RobotState:
     def forget_limits(self) -> None:
         """Read the limits again (after a reconnect: it may be another controller)."""
         self.lower = self.upper = None
+        self.arm = None
 
     def update(self, results: dict[str, ReadResult], watch: list[str]) -> None:
         """Take one poll's answers."""
@@ -107,10 +118,7 @@ class RobotState:
         pose = _parse(results.get("$POS_ACT"))
         if isinstance(pose, Struct):
             self.pose = {k: pose[k] for k in POSE if k in pose}  # type: ignore[misc]
-        lower = _floats(_parse(results.get("$SOFTN_END[]")))
-        upper = _floats(_parse(results.get("$SOFTP_END[]")))
-        if lower is not None and upper is not None:
-            self.lower, self.upper = lower, upper
+        self._limits(results)
         override = _parse(results.get("$OV_PRO"))
         if isinstance(override, int) and not isinstance(override, bool):
             self.override = override
@@ -133,6 +141,21 @@ class RobotState:
             self.joint_history[i].append(self.joints[i])
             self.torque_history[i].append(self.torques[i])
         self.updates += 1
+
+    def _limits(self, results: dict[str, ReadResult]) -> None:
+        """The software limits: the controller's, else the named arm's catalogue limits."""
+        name = results.get("$MODEL_NAME[]")
+        if name is not None:
+            text = _parse(name)
+            self.arm = choose_arm(text if isinstance(text, str) else "", self.given)
+        lower = _floats(_parse(results.get("$SOFTN_END[]")))
+        upper = _floats(_parse(results.get("$SOFTP_END[]")))
+        if lower is not None and upper is not None:
+            self.lower, self.upper, self.limits_from = lower, upper, "controller"
+        elif name is not None and self.arm is not None and self.arm.key:
+            model = self.arm.model
+            self.lower, self.upper = model.lower.tolist(), model.upper.tolist()
+            self.limits_from = "catalogue"
 
 
 def _why(result: ReadResult) -> str:

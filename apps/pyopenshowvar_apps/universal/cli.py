@@ -98,6 +98,9 @@ def universal(
     if kvp is None and Opts.emulate:
         from pyopenshowvar_apps.web.runner import KRL_DIR
 
+        # the embedded emulator is the arm driven (kvp --robot, if given, wins: KVPArm then
+        # refuses a robot whose $MODEL_NAME[] is not the arm's)
+        Opts.robot = Opts.robot or arm
         start_embedded_emulator(ctx, program=str(KRL_DIR / "kvp_jog.src"),
                                 config_files=[KRL_DIR / "kvp_jog_config.dat"])  # fmt: skip
         target = (Opts.host, Opts.port)

@@ -62,6 +62,7 @@ def web(
 
     With the global --emulate, an embedded emulator runs the KVP_JOG program.
     """
+    from pyopenshowvar_apps.armpick import given_arm
     from pyopenshowvar_apps.web.runner import KRL_DIR, WebServer, is_loopback, lan_address
 
     if krl_dir is not None:
@@ -97,6 +98,7 @@ def web(
                 timeout=Opts.timeout,
                 emulated=Opts.emulator is not None,
                 allow_motion_writes=allow_motion_writes,
+                arm=given_arm(Opts.robot) if Opts.robot else None,
             )
         except OSError as exc:
             fail(EXIT_USAGE, f"cannot serve on {bind}:{http_port}: {exc.strerror or exc}")

@@ -90,13 +90,13 @@ class JogController:
         client: Client,
         link: RobotLink,
         *,
-        model: RobotModel,
+        model: RobotModel | None = None,
         hold_timeout: float = HOLD_TIMEOUT,
         credit: int = CREDIT,
     ) -> None:
         self.client = client
         self.link = link
-        self.model = model
+        self._model = model
         self.hold_timeout = hold_timeout
         self.credit = credit
         self.jog: _Jog | None = None
@@ -104,6 +104,11 @@ class JogController:
         #: Why the last jog ended (shown on the page), and when.
         self.last_stop: tuple[str, float] | None = None
         self._done: dict[object, int] = {}  # owner -> last press that ended (never restart it)
+
+    @property
+    def model(self) -> RobotModel:
+        """The arm jogged: the one given, else the link's (the connected robot's)."""
+        return self._model if self._model is not None else self.link.model
 
     # --- what the page sees -----------------------------------------------------------------
     def describe(self, owner: object) -> dict[str, Any]:

@@ -8,7 +8,10 @@ emulator-only ``$EMU_MESSAGE[]``, the jog globals before KVP_JOG is installed) a
 found missing, and then left out, so a real KRC costs no failed reads per period.
 
 The arm is drawn from the kinematics: :func:`arm_frames` sends the frame of every joint (D-H
-frames 0..5), the flange and the TCP, so the page only has to draw what it is given.
+frames 0..5), the flange and the TCP, so the page only has to draw what it is given. Which
+arm: the one the controller's ``$MODEL_NAME[]`` names in the catalogue (read with the slow
+variables, so a different robot behind the same address is noticed), unless the server was
+given one (``kvp web --robot``); see :mod:`..armpick`.
 """
 
 from __future__ import annotations
@@ -23,8 +26,9 @@ from typing import Any
 import numpy as np
 
 from pyopenshowvar import Client, KvpError, Struct, UnknownVariableError
-from pyopenshowvar.kinematics import KR6R900SIXX, RobotModel, link_frames, pose_to_matrix
+from pyopenshowvar.kinematics import RobotModel, link_frames, pose_to_matrix
 
+from ..armpick import DEFAULT_CHOICE, ArmChoice, choose_arm
 from ..common import to_jsonable
 
 __all__ = ["MAX_WATCH", "RobotLink", "arm_frames"]
@@ -37,7 +41,7 @@ FAST = (
     "$MODE_OP", "$STOPMESS", "JOG_MODE", "$EMU_MESSAGE[]",
 )  # fmt: skip
 #: Read about once a second: they change rarely.
-SLOW = ("$SOFTN_END[]", "$SOFTP_END[]", "$TOOL", "$BASE", "$ROBNAME[]")
+SLOW = ("$SOFTN_END[]", "$SOFTP_END[]", "$TOOL", "$BASE", "$ROBNAME[]", "$MODEL_NAME[]")
 #: Names the watch lists of all pages may add to one poll, in total.
 MAX_WATCH = 32
 _AXES = ("A1", "A2", "A3", "A4", "A5", "A6")
@@ -74,11 +78,14 @@ class RobotLink:
         *,
         timeout: float = 2.0,
         hz: float = 20.0,
-        model: RobotModel = KR6R900SIXX,
+        arm: ArmChoice | None = None,
     ) -> None:
         self.client = Client(host, port, timeout=timeout, auto_reconnect=True, keepalive=None)
         self.period = 1.0 / hz
-        self.model = model
+        #: The arm given by the user (None: follow ``$MODEL_NAME[]``).
+        self.given = arm
+        #: The arm drawn and jogged now.
+        self.arm = arm or DEFAULT_CHOICE
         self.snapshot: dict[str, Any] = {"link": {"connected": False, "error": "connecting"}}
         self.listeners: list[Callable[[dict[str, Any]], None]] = []
         #: Watch-list names requested by the pages (set by the server, bounded by MAX_WATCH).
@@ -89,6 +96,11 @@ class RobotLink:
         self.rate = 0.0  # polls per second achieved
         self.connected = False
         self._last_slow = -math.inf
+
+    @property
+    def model(self) -> RobotModel:
+        """The closed-form model of the arm drawn and jogged now."""
+        return self.arm.model
 
     # --- state the jog controller uses ------------------------------------------------------
     def axes(self) -> np.ndarray | None:
@@ -167,9 +179,20 @@ class RobotLink:
                 self.values[name] = r.value
             elif isinstance(r.error, UnknownVariableError) and name in FAST + SLOW:
                 self.missing.add(name)
+        if slow:
+            self._pick_arm()
         self.seq += 1
         self.snapshot = self._build(watch)
         self._notify()
+
+    def _pick_arm(self) -> None:
+        """Follow the controller's ``$MODEL_NAME[]`` (unless an arm was given)."""
+        name = self.text("$MODEL_NAME[]")
+        choice = choose_arm(name, self.given)
+        if choice != self.arm:
+            if choice.model is not self.arm.model:
+                log.info("drawing %s (%s)", choice.model.name, choice.source)
+            self.arm = choice
 
     def _notify(self) -> None:
         for listener in list(self.listeners):
@@ -210,6 +233,12 @@ class RobotLink:
                 "jog_ready": self.jog_ready(),
             },
             "arm": arm_frames(self.model, q, tool) if q is not None else None,
+            "model": {
+                "name": self.model.name,
+                "key": self.arm.key,
+                "source": self.arm.source,
+                "reach": round(self.arm.reach, 1),
+            },
             "watch": watch,
         }
         return state

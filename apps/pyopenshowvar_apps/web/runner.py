@@ -17,8 +17,8 @@ from types import TracebackType
 import uvicorn
 
 from pyopenshowvar import Client
-from pyopenshowvar.kinematics import KR6R900SIXX, RobotModel
 
+from ..armpick import ArmChoice
 from .httpguard import HEAD_TIMEOUT, TOTAL, ConnectionGuard, guarded_protocols
 from .jog import JogController
 from .link import RobotLink
@@ -67,14 +67,15 @@ class WebServer:
         timeout: float = 2.0,
         emulated: bool = False,
         allow_motion_writes: bool = False,
-        model: RobotModel = KR6R900SIXX,
+        arm: ArmChoice | None = None,
     ) -> None:
         self.bind = bind
-        self.link = RobotLink(kvp_host, kvp_port, timeout=timeout, hz=hz, model=model)
+        # the arm drawn and jogged: ``arm``, else the one the robot's $MODEL_NAME[] names
+        self.link = RobotLink(kvp_host, kvp_port, timeout=timeout, hz=hz, arm=arm)
         # Its own connection: a stop is never queued behind the live view's reads.
         self.control = Client(kvp_host, kvp_port, timeout=timeout, auto_reconnect=True,
                               keepalive=None)  # fmt: skip
-        self.jog = JogController(self.control, self.link, model=model)
+        self.jog = JogController(self.control, self.link)
         self.config = WebConfig(
             token=token, emulated=emulated, allow_motion_writes=allow_motion_writes
         )

@@ -68,7 +68,8 @@ function onState(s) {
   setConn(!!link.connected && ws.readyState === WebSocket.OPEN);
   if (!link.connected) { banner("robot: " + (link.error || "not connected"), true); return; }
   $("access").textContent = link.ewma_ms == null ? "– ms" : `${link.ewma_ms.toFixed(1)} / ${link.max_ms.toFixed(0)} ms`;
-  $("robot").textContent = (s.robot || "robot") + (hello && hello.emulated ? " (emulated)" : "");
+  $("robot").textContent = (s.robot || "robot") + (s.model ? " · " + s.model.name : "")
+    + (hello && hello.emulated ? " (emulated)" : "");
   const p = s.program || {};
   const prog = $("prog");
   prog.textContent = `${p.name || "no program"} ${(p.state || "").replace("#P_", "")}`;
@@ -82,6 +83,7 @@ function onState(s) {
     : p.jog_ready ? "jog unavailable: " + p.jog_ready
     : s.ov != null && s.ov < 100 ? `$OV_PRO is ${s.ov} %: the jog runs slower and stops later (100 ms needs 100 %)` : "";
   banner(warn, !!p.message);
+  if (s.model) view.setArm(s.model.name, s.model.reach);
   if (s.arm) view.setFrames(s.arm);
   updateRows(s);
   updatePose(s.pose);

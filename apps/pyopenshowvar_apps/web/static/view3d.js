@@ -4,6 +4,8 @@
 // and the TCP), each as x axis, y axis, z axis and origin in mm. A D-H step runs along the
 // previous z axis (d) and then along the new x axis (a), so the arm's skeleton is the chain
 // o0, foot of o1 on z0, o1, foot of o2 on z1, ... and needs no robot-specific geometry here.
+// Every size here is the KR 6 R900 sixx's; setArm scales them to the arm the server draws (its
+// reach), so a KR 560 fills the view as a KR 6 does.
 // Drag to orbit, wheel or pinch to zoom, double-click to reset.
 "use strict";
 
@@ -19,12 +21,16 @@ const V = {
 // Link radii (mm) from the base outwards; the last ones repeat.
 const RADII = [75, 60, 55, 45, 40, 32, 28, 22];
 const HOME_VIEW = { yaw: -0.9, pitch: 0.38, dist: 2000 };
+// The KR 6's reach (mm, A2 to the wrist centre) that the sizes above were chosen for.
+const KR6_REACH = 876.5;
 
 class ArmView {
   constructor(canvas) {
     this.canvas = canvas;
     this.ctx = canvas.getContext("2d");
     this.frames = null;
+    this.k = 1;  // the arm's size over the KR 6's
+    this.arm = "";
     Object.assign(this, HOME_VIEW);
     this.target = [220, 0, 420];
     this.pointers = new Map();
@@ -35,6 +41,17 @@ class ArmView {
   }
 
   setFrames(frames) { this.frames = frames; this.dirty = true; }
+
+  // The arm drawn changed (model name and reach in mm): rescale the view to it.
+  setArm(name, reach) {
+    if (name === this.arm || !(reach > 0)) return;
+    this.arm = name;
+    this.k = reach / KR6_REACH;
+    Object.assign(this, HOME_VIEW);
+    this.dist = HOME_VIEW.dist * this.k;
+    this.target = [220 * this.k, 0, 420 * this.k];
+    this.dirty = true;
+  }
 
   _bind() {
     const c = this.canvas;
@@ -58,10 +75,10 @@ class ArmView {
       this.dirty = true;
     });
     c.addEventListener("wheel", (e) => { e.preventDefault(); this._zoom(Math.exp(e.deltaY * 0.001)); }, { passive: false });
-    c.addEventListener("dblclick", () => { Object.assign(this, HOME_VIEW); this.dirty = true; });
+    c.addEventListener("dblclick", () => { Object.assign(this, HOME_VIEW); this.dist *= this.k; this.dirty = true; });
   }
 
-  _zoom(f) { this.dist = Math.max(800, Math.min(8000, this.dist * f)); this.dirty = true; }
+  _zoom(f) { this.dist = Math.max(800 * this.k, Math.min(8000 * this.k, this.dist * f)); this.dirty = true; }
 
   _camera(w, h) {
     const cp = Math.cos(this.pitch);
@@ -108,10 +125,10 @@ class ArmView {
     for (let i = 1; i < pts.length; i++) {
       if (Math.hypot(...V.sub(pts[i], pts[i - 1])) < 1) continue;
       const a = P(pts[i - 1]), b = P(pts[i]);
-      items.push({ z: (a.z + b.z) / 2, a, b, r: RADII[Math.min(k++, RADII.length - 1)] });
+      items.push({ z: (a.z + b.z) / 2, a, b, r: this.k * RADII[Math.min(k++, RADII.length - 1)] });
     }
     for (let j = 0; j < 6; j++) {  // the joint housings, along their axes
-      const o = fr[j].o, ax = fr[j].z, r = RADII[Math.min(j + 1, RADII.length - 1)] * 1.15;
+      const o = fr[j].o, ax = fr[j].z, r = this.k * RADII[Math.min(j + 1, RADII.length - 1)] * 1.15;
       const a = P(V.add(o, V.mul(ax, -r))), b = P(V.add(o, V.mul(ax, r)));
       items.push({ z: (a.z + b.z) / 2 - 1, a, b, r, joint: true });
     }
@@ -125,8 +142,8 @@ class ArmView {
       g.lineWidth = Math.max(2, 2 * it.r * ((it.a.s + it.b.s) / 2));
       g.beginPath(); g.moveTo(it.a.x, it.a.y); g.lineTo(it.b.x, it.b.y); g.stroke();
     }
-    this._triad(g, P, fr[fr.length - 1], 120, 2.5);
-    this._triad(g, P, { o: [0, 0, 0], x: [1, 0, 0], y: [0, 1, 0], z: [0, 0, 1] }, 200, 1.5);
+    this._triad(g, P, fr[fr.length - 1], 120 * this.k, 2.5);
+    this._triad(g, P, { o: [0, 0, 0], x: [1, 0, 0], y: [0, 1, 0], z: [0, 0, 1] }, 200 * this.k, 1.5);
     const tcp = P(fr[fr.length - 1].o);
     g.fillStyle = "#fff";
     g.beginPath(); g.arc(tcp.x, tcp.y, 3.5, 0, 2 * Math.PI); g.fill();
@@ -135,8 +152,10 @@ class ArmView {
   _floor(g, P) {
     g.lineWidth = 1;
     g.strokeStyle = "rgba(255,255,255,0.09)";
-    for (let v = -1200; v <= 1200; v += 200) {
-      for (const [a, b] of [[[v, -1200, 0], [v, 1200, 0]], [[-1200, v, 0], [1200, v, 0]]]) {
+    const e = 1200 * this.k;
+    for (let i = -6; i <= 6; i++) {
+      const v = (i * e) / 6;
+      for (const [a, b] of [[[v, -e, 0], [v, e, 0]], [[-e, v, 0], [e, v, 0]]]) {
         const pa = P(a), pb = P(b);
         g.beginPath(); g.moveTo(pa.x, pa.y); g.lineTo(pb.x, pb.y); g.stroke();
       }
@@ -144,7 +163,7 @@ class ArmView {
     g.fillStyle = "rgba(120,130,140,0.55)";
     g.beginPath();
     for (let i = 0; i <= 32; i++) {
-      const t = (i / 32) * 2 * Math.PI, p = P([160 * Math.cos(t), 160 * Math.sin(t), 0]);
+      const t = (i / 32) * 2 * Math.PI, r = 160 * this.k, p = P([r * Math.cos(t), r * Math.sin(t), 0]);
       if (i === 0) g.moveTo(p.x, p.y); else g.lineTo(p.x, p.y);
     }
     g.fill();
