@@ -175,7 +175,7 @@ def create_app(
         try:
             while True:
                 text = await ws.receive_text()
-                if not page.allow():
+                if not page.bucket.allow(time.monotonic()):
                     await ws.close(code=1008, reason="too many messages")
                     break
                 try:
