@@ -6,10 +6,13 @@ asyncua exactly as documented:
 
 * ``NodeId``'s fields are annotated with asyncua's own wrapper classes (``Int32 | String |
   Guid | ByteString``, ``Int16``), while ``NodeId.__post_init__`` takes a plain int, str, bytes
-  or UUID and guesses the encoding from it (what every asyncua example does);
+  or UUID and guesses the encoding from it; and the identifier read back is that union (the
+  gateway's own nodes have string paths: :func:`path_of`);
 * ``StatusCode.value`` is annotated ``UInt32`` while the code table ``StatusCodes`` holds ints;
 * ``DataValue``'s timestamps are annotated with asyncua's ``DateTime`` subclass, while its
-  binary encoder takes any ``datetime``;
+  binary encoder takes any ``datetime``; its ``Value`` is annotated optional, while
+  ``__post_init__`` always makes it a Variant;
+* ``uatcp_to_binary`` and ``ErrorMessage`` (see :func:`error_frame`);
 * ``asyncua.Server`` / ``Client`` and ``asyncua.ua.ObjectIds`` / ``AttributeIds`` /
   ``StatusCodes`` are imported by their packages without being re-exported.
 
