@@ -17,6 +17,7 @@ import websockets
 from pyopenshowvar_apps.universal.server import ControlServer
 from pyopenshowvar_apps.universal.sim import SimulatedArm
 from pyopenshowvar_apps.universal.web import HOLD_TIMEOUT, ViewServer, WebInput
+from pyopenshowvar_apps.web.policy import BURST
 from websockets.asyncio.client import ClientConnection, connect
 
 from pyopenshowvar.arms import load_arm
@@ -132,6 +133,18 @@ async def test_one_page_moves_the_arm_at_a_time_and_switches(page_rig: Any) -> N
     await a.close()
     await b.close()
     assert HOLD_TIMEOUT == 0.1
+
+
+async def test_a_flooding_page_is_closed_by_its_message_budget(page_rig: Any) -> None:
+    """Past the pad's burst (BURST messages, RATE a second) the page is closed with 1008."""
+    _, view = page_rig
+    ws = await open_page(view)
+    with contextlib.suppress(websockets.ConnectionClosed):
+        for _ in range(int(BURST) * 10):  # far past the burst, whatever the refill meanwhile
+            await ws.send(json.dumps({"t": "alive"}))
+    async with asyncio.timeout(5):
+        await ws.wait_closed()
+    assert ws.close_code == 1008 and ws.close_reason == "too many messages"
 
 
 async def test_token_and_origin_are_required() -> None:

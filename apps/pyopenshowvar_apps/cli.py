@@ -138,7 +138,7 @@ class KvpGroup(TyperGroup):
     def __init__(self, **kw: Any) -> None:
         super().__init__(**kw)
         # the commands are built with the app's settings, as typer builds an eager group's
-        settings = {"rich_markup_mode": self.rich_markup_mode}
+        settings: dict[str, object] = {"rich_markup_mode": self.rich_markup_mode}
         if hasattr(self, "suggest_commands"):  # typer >= 0.16
             settings["suggest_commands"] = self.suggest_commands
         lazy = LazyCommands(**settings)

@@ -153,8 +153,10 @@ async def login_once(
     url: str, cert: Path, key: Path, user: str, password: str, tally: LoginTally
 ) -> None:
     """One login attempt with Basic256Sha256 Sign&Encrypt; counted in ``tally``."""
-    from asyncua import Client, ua
     from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
+
+    from . import ua
+    from .ua import Client
 
     client = Client(url, timeout=10)
     client.application_uri = CLIENT_URI

@@ -21,8 +21,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from asyncua import Server, ua
-from asyncua.server.address_space import AttributeValue, NodeData
+from asyncua.server.address_space import AddressSpace, AttributeValue, NodeData
+
+from . import ua
+from .ua import Server
 
 __all__ = ["RobotTemplate"]
 
@@ -75,16 +77,17 @@ class RobotTemplate:
         if len(prefixes) != len(self.roots):
             raise ValueError("a robot template is stamped with as many roots as it has")
         for prefix in prefixes:
-            if ua.NodeId(prefix, self.ns) in aspace:
+            if ua.node_id(prefix, self.ns) in aspace:
                 raise ValueError(f"{prefix} already exists")
         for node in self.nodes:
-            new_id = ua.NodeId(prefixes[node.root] + node.suffix, self.ns)
+            new_id = ua.node_id(prefixes[node.root] + node.suffix, self.ns)
             data = NodeData(new_id)
             for attr, dv in node.attributes:
                 if attr == ua.AttributeIds.NodeId:
                     dv = ua.DataValue(ua.Variant(new_id, ua.VariantType.NodeId))
                 elif node.suffix == "" and attr in _NAMES:
                     dv = self._renamed_value(dv, name)
+                # asyncua's AttributeValue holds a DataValue | None; its __init__ says DataValue
                 data.attributes[attr] = AttributeValue(dv)  # type: ignore[arg-type]
             data.references = [self._moved(r, prefixes, name) for r in node.references]
             aspace[new_id] = data
@@ -104,7 +107,7 @@ class RobotTemplate:
         new = _copy_ref(ref)
         target = self._target(ref.NodeId)
         if target is not None:
-            new.NodeId = ua.NodeId(prefixes[target.root] + target.suffix, self.ns)
+            new.NodeId = ua.node_id(prefixes[target.root] + target.suffix, self.ns)
             if target.suffix == "":
                 self._rename_ref(new, name)
         return new
@@ -125,13 +128,13 @@ class RobotTemplate:
             return ua.DataValue(ua.Variant(text, ua.VariantType.LocalizedText))
         return dv
 
-    def _link_parent(self, aspace: object, index: int, root: ua.NodeId, name: str) -> None:
+    def _link_parent(self, aspace: AddressSpace, index: int, root: ua.NodeId, name: str) -> None:
         """The parent's forward reference to a new root: a copy of the one to the template's."""
-        template_root = ua.NodeId(self.roots[index], self.ns)
+        template_root = ua.node_id(self.roots[index], self.ns)
         for ref in self._inside[self.roots[index]].references:
             if ref.IsForward or self._target(ref.NodeId) is not None:
                 continue  # the root's inverse reference from outside names its parent
-            parent = aspace[ref.NodeId]  # type: ignore[index]
+            parent = aspace[ref.NodeId]
             for down in list(parent.references):
                 if down.IsForward and down.NodeId == template_root:
                     new = _copy_ref(down)

@@ -24,14 +24,15 @@ import logging
 from datetime import datetime
 from typing import Any
 
-from asyncua import Server, ua
+from . import ua
+from .ua import Server
 
 __all__ = ["LiveNode", "Sink"]
 
 log = logging.getLogger(__name__)
 
 _VALUE = ua.AttributeIds.Value
-_GOOD = ua.StatusCode(ua.StatusCodes.Good)
+_GOOD = ua.status_code(ua.StatusCodes.Good)
 _NULL = ua.VariantType.Null
 _MISSING = object()
 
@@ -75,8 +76,9 @@ class LiveNode:
             else:
                 # OPC 10000-4 §7.7.1: a Bad value is null (asyncua's write does the same)
                 variant = ua.Variant(None, _NULL)
+            stamp = ua.timestamp(self.stamp)
             dv = self._dv = _SharedDataValue(
-                variant, self.status, SourceTimestamp=self.stamp, ServerTimestamp=self.stamp
+                variant, self.status, SourceTimestamp=stamp, ServerTimestamp=stamp
             )
         return dv
 
@@ -97,7 +99,7 @@ class LiveNode:
         """Store a Bad status (the value becomes null); False when it was already that."""
         if self.status is not _GOOD and self.status.value == code:
             return False
-        self.value, self.stamp, self.status = _MISSING, stamp, ua.StatusCode(code)
+        self.value, self.stamp, self.status = _MISSING, stamp, ua.status_code(code)
         self._dv = None
         return True
 
@@ -163,7 +165,7 @@ class Sink:
         """For a BaseDataType node: fix its DataType to ``vtype`` the first time, then set."""
         if node.Identifier not in self._typed:
             self._typed.add(node.Identifier)
-            dt = ua.DataValue(ua.Variant(ua.NodeId(vtype.value), ua.VariantType.NodeId))
+            dt = ua.DataValue(ua.Variant(ua.node_id(vtype.value), ua.VariantType.NodeId))
             await self._aspace.write_attribute_value(node, ua.AttributeIds.DataType, dt)
         await self.set(node, value, vtype, ts)
 

@@ -151,7 +151,7 @@ def poll_values(
     out: dict[str, Any] = {}
     axes = values.get("$AXIS_ACT")
     # a Struct from parse_value, or the members' dict from the fast path (parse_number_struct)
-    members = axes.members if isinstance(axes, Struct) else axes
+    members: object = axes.members if isinstance(axes, Struct) else axes
     if want("$AXIS_ACT") and isinstance(members, Mapping):
         try:
             out["position"] = [float(members[a]) for a in _AXES]

@@ -24,7 +24,8 @@ from dataclasses import dataclass
 from importlib import resources
 from typing import Any
 
-from asyncua import Server, ua
+from . import ua
+from .ua import Server
 
 __all__ = [
     "DI_URI",
@@ -47,13 +48,13 @@ ROBOTICS_URI = "http://opcfoundation.org/UA/Robotics/"
 GATEWAY_URI = "urn:pyopenshowvar:kvp-gateway"
 NODESET_FILES = ("Opc.Ua.Di.NodeSet2.xml", "Opc.Ua.IA.NodeSet2.xml", "Opc.Ua.Robotics.NodeSet2.xml")
 
-_MANDATORY = ua.NodeId(ua.ObjectIds.ModellingRule_Mandatory)
-_OPTIONAL = ua.NodeId(ua.ObjectIds.ModellingRule_Optional)
+_MANDATORY = ua.node_id(ua.ObjectIds.ModellingRule_Mandatory)
+_OPTIONAL = ua.node_id(ua.ObjectIds.ModellingRule_Optional)
 _PLACEHOLDERS = {
-    ua.NodeId(ua.ObjectIds.ModellingRule_MandatoryPlaceholder),
-    ua.NodeId(ua.ObjectIds.ModellingRule_OptionalPlaceholder),
+    ua.node_id(ua.ObjectIds.ModellingRule_MandatoryPlaceholder),
+    ua.node_id(ua.ObjectIds.ModellingRule_OptionalPlaceholder),
 }
-_HAS_COMPONENT = ua.NodeId(ua.ObjectIds.HasComponent)
+_HAS_COMPONENT = ua.node_id(ua.ObjectIds.HasComponent)
 
 
 def _nodeset_text(name: str) -> str:
@@ -132,7 +133,7 @@ class Instantiator:
         self.session = server.iserver.isession
         self.ns = ns
         self._plans: dict[tuple[ua.NodeId, bool], list[Decl]] = {}
-        self._attrs: dict[ua.NodeId, Any] = {}
+        self._attrs: dict[ua.NodeId, tuple[ua.NodeClass, dict[str, Any]]] = {}
 
     async def children(self, node: ua.NodeId, *, is_type: bool) -> list[Decl]:
         """The declarations an instance of ``node`` (a type or a declaration) may have."""
@@ -174,7 +175,7 @@ class Instantiator:
         ("ParameterSet/ActualSpeed"); Mandatory children are always created. ``attributes``
         overrides attributes of the new node (e.g. a concrete DataType for an AnalogUnitType).
         """
-        new_id = ua.NodeId(node_id, self.ns)
+        new_id = ua.node_id(node_id, self.ns)
         template = source if source is not None else type_definition
         item = await self._item(template, type_definition, parent, reference, new_id, browse_name)
         # an instance is named after itself, not after its type or the placeholder it fills
@@ -207,7 +208,7 @@ class Instantiator:
                 batch.reference(parent, d.reference, d.source)
                 continue
             node_id = f"{parent_path}.{d.browse_name.Name}"
-            new_id = ua.NodeId(node_id, self.ns)
+            new_id = ua.node_id(node_id, self.ns)
             item = await self._item(
                 d.source, d.type_definition, parent, d.reference, new_id, d.browse_name
             )
@@ -242,7 +243,7 @@ class Instantiator:
     async def _attributes(self, node: ua.NodeId) -> tuple[ua.NodeClass, dict[str, Any]]:
         cached = self._attrs.get(node)
         if cached is not None:
-            return cached  # type: ignore[no-any-return]
+            return cached
         n = self.server.get_node(node)
         node_class = await n.read_node_class()
         names = ["DisplayName", "Description"]
@@ -254,7 +255,7 @@ class Instantiator:
         ids = [getattr(ua.AttributeIds, a) for a in names]
         values = await n.read_attributes(ids)
         attrs = {
-            name: (dv if name == "Value" else dv.Value.Value)
+            name: (dv if name == "Value" else ua.variant_of(dv).Value)
             for name, dv in zip(names, values, strict=True)
             if dv.StatusCode is None or dv.StatusCode.is_good()
         }
@@ -290,7 +291,7 @@ class Instantiator:
         seen: set[ua.NodeId] = set()
         for r in refs:
             # The importer can record a reference both from the parent and from the child.
-            if r.NodeId in seen or r.ReferenceTypeId == ua.NodeId(ua.ObjectIds.HasSubtype):
+            if r.NodeId in seen or r.ReferenceTypeId == ua.node_id(ua.ObjectIds.HasSubtype):
                 continue
             seen.add(r.NodeId)
             if r.NodeClass not in (ua.NodeClass.Object, ua.NodeClass.Variable, ua.NodeClass.Method):
@@ -299,7 +300,7 @@ class Instantiator:
                 refs=ua.ObjectIds.HasModellingRule
             )
             rule = rules[0].nodeid if rules else None
-            tdef = r.TypeDefinition if r.NodeClass != ua.NodeClass.Method else ua.NodeId()
+            tdef = r.TypeDefinition if r.NodeClass != ua.NodeClass.Method else ua.node_id()
             out.append(Decl(r.NodeId, r.BrowseName, r.NodeClass, r.ReferenceTypeId, tdef, rule))
         return out
 
@@ -322,7 +323,7 @@ def _copy(attrs: dict[str, Any], node_class: ua.NodeClass, name: ua.QualifiedNam
     if node_class == ua.NodeClass.Object:
         given["EventNotifier"] = attrs.get("EventNotifier", 0)
     else:
-        given["DataType"] = attrs.get("DataType", ua.NodeId(ua.ObjectIds.BaseDataType))
+        given["DataType"] = attrs.get("DataType", ua.node_id(ua.ObjectIds.BaseDataType))
         given["ValueRank"] = attrs.get("ValueRank", -1)
         if attrs.get("ArrayDimensions"):
             given["ArrayDimensions"] = attrs["ArrayDimensions"]

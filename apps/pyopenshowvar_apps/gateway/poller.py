@@ -32,13 +32,12 @@ from collections.abc import Mapping, Sequence
 from datetime import UTC, datetime
 from typing import Any
 
-from asyncua import ua
-
 from pyopenshowvar import Client, KrlEnum, KvpError, Struct, UnknownVariableError, parse_value
 from pyopenshowvar.errors import KrlValueError
 from pyopenshowvar.krl.parse import parse_number_list, parse_number_struct
 
 from ..armpick import DEFAULT_CHOICE, choose_arm, given_arm
+from . import ua
 from .budget import ValueTooLongError, WorkBudget
 from .cell import RobotConfig, SnapshotGroup, canonical
 from .live import LiveNode, Sink
@@ -209,7 +208,11 @@ class RobotPoller:
     async def _identity(self, client: Client) -> list[str]:
         results = await client.read_many(IDENTITY_VARIABLES, timeout=self.cfg.timeout)
         self.budget.begin()
-        values = {n: await self._parse_reply(n, r.text) for n, r in results.items() if r.ok}
+        values = {
+            n: await self._parse_reply(n, r.text)
+            for n, r in results.items()
+            if r.ok and r.text is not None
+        }
         ident = identity_values(values)
         stamp = datetime.now(UTC)
         await self._arm(text_of(values.get("$MODEL_NAME[]")), stamp)
@@ -267,8 +270,8 @@ class RobotPoller:
         tasks = self.nodes.tasks
         if n.identity.get("task_reference") and "robot" in tasks:
             robot_task = tasks["robot"].program_name
-            tc = ua.NodeId(
-                robot_task.Identifier.rsplit(".ParameterSet.", 1)[0], robot_task.NamespaceIndex
+            tc = ua.node_id(
+                ua.path_of(robot_task).rsplit(".ParameterSet.", 1)[0], robot_task.NamespaceIndex
             )
             await s.set(n.identity["task_reference"][0], tc, _V.NodeId, stamp)
         for key, label in (
@@ -294,7 +297,7 @@ class RobotPoller:
             ("degC", n.temperature),
         ):
             for node in nodes:
-                eu = ua.NodeId(f"{node.Identifier}.EngineeringUnits", node.NamespaceIndex)
+                eu = ua.node_id(f"{ua.path_of(node)}.EngineeringUnits", node.NamespaceIndex)
                 await s.set(eu, UNITS[unit], _V.ExtensionObject, stamp)
 
     async def _apply(

@@ -26,10 +26,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from asyncua import Server, ua
-
+from . import ua
 from .clone import RobotTemplate
 from .model import DI_URI, GATEWAY_URI, ROBOTICS_URI, Instantiator, NodeBatch
+from .ua import Server
 
 __all__ = ["AXES", "CellNodes", "RobotNodes", "TaskNodes", "build_cell", "check_type_ids"]
 
@@ -56,10 +56,10 @@ ROBOTICS_IDS = {
 }
 DI_IDS = {"SoftwareType": 15106, "DeviceSet": 5001}
 
-_ANALOG_UNIT = ua.NodeId(ua.ObjectIds.AnalogUnitType)
-_DATA_VARIABLE = ua.NodeId(ua.ObjectIds.BaseDataVariableType)
-_HAS_COMPONENT = ua.NodeId(ua.ObjectIds.HasComponent)
-_HAS_ADDIN = ua.NodeId(ua.ObjectIds.HasAddIn)
+_ANALOG_UNIT = ua.node_id(ua.ObjectIds.AnalogUnitType)
+_DATA_VARIABLE = ua.node_id(ua.ObjectIds.BaseDataVariableType)
+_HAS_COMPONENT = ua.node_id(ua.ObjectIds.HasComponent)
+_HAS_ADDIN = ua.node_id(ua.ObjectIds.HasAddIn)
 _UNITS_URI = "http://www.opcfoundation.org/UA/units/un/cefact"
 
 
@@ -135,13 +135,13 @@ class CellNodes:
 
 
 def _rid(ns: dict[str, int], name: str) -> ua.NodeId:
-    return ua.NodeId(ROBOTICS_IDS[name], ns[ROBOTICS_URI])
+    return ua.node_id(ROBOTICS_IDS[name], ns[ROBOTICS_URI])
 
 
 async def check_type_ids(server: Server, ns: dict[str, int]) -> None:
     """Every hard-coded id names the node the specification says (a wrong NodeSet fails loud)."""
-    pairs = [(ua.NodeId(i, ns[ROBOTICS_URI]), n) for n, i in ROBOTICS_IDS.items()]
-    pairs += [(ua.NodeId(i, ns[DI_URI]), n) for n, i in DI_IDS.items()]
+    pairs = [(ua.node_id(i, ns[ROBOTICS_URI]), n) for n, i in ROBOTICS_IDS.items()]
+    pairs += [(ua.node_id(i, ns[DI_URI]), n) for n, i in DI_IDS.items()]
     for node_id, name in pairs:
         browse = await server.get_node(node_id).read_browse_name()
         if browse.Name != name:
@@ -157,10 +157,13 @@ async def _state_table(server: Server, ns: dict[str, int]) -> tuple[dict[str, An
     transitions: dict[str, tuple[ua.NodeId, int]] = {}
     for child in await machine.get_children(refs=ua.ObjectIds.HasComponent):
         tdef = await child.read_type_definition()
-        if tdef not in (ua.NodeId(ua.ObjectIds.StateType), ua.NodeId(ua.ObjectIds.TransitionType)):
+        if tdef not in (
+            ua.node_id(ua.ObjectIds.StateType),
+            ua.node_id(ua.ObjectIds.TransitionType),
+        ):
             continue
         name = (await child.read_browse_name()).Name
-        prop = "StateNumber" if tdef == ua.NodeId(ua.ObjectIds.StateType) else "TransitionNumber"
+        prop = "StateNumber" if tdef == ua.node_id(ua.ObjectIds.StateType) else "TransitionNumber"
         number = await (await child.get_child(prop)).read_value()
         (states if prop == "StateNumber" else transitions)[name] = (child.nodeid, int(number))
     return states, transitions
@@ -173,7 +176,7 @@ async def build_cell(
     await check_type_ids(server, ns)
     batch = NodeBatch()
     ours = ns[GATEWAY_URI]
-    device_set = ua.NodeId(DI_IDS["DeviceSet"], ns[DI_URI])
+    device_set = ua.node_id(DI_IDS["DeviceSet"], ns[DI_URI])
     system = await inst.add(
         batch,
         device_set,
@@ -185,9 +188,9 @@ async def build_cell(
     states, transitions = await _state_table(server, ns)
     return CellNodes(
         system,
-        ua.NodeId(f"{cell_name}.MotionDevices", ours),
-        ua.NodeId(f"{cell_name}.Controllers", ours),
-        ua.NodeId(f"{cell_name}.SafetyStates", ours),
+        ua.node_id(f"{cell_name}.MotionDevices", ours),
+        ua.node_id(f"{cell_name}.Controllers", ours),
+        ua.node_id(f"{cell_name}.SafetyStates", ours),
         ns,
         states,
         transitions,
@@ -203,12 +206,12 @@ async def _commit(server: Server, batch: NodeBatch) -> None:
                 f"cannot add {item.RequestedNewNodeId.to_string()}: {res.StatusCode}"
             )
     if batch.references:
-        for item, code in zip(
+        for ref, code in zip(
             batch.references, await session.add_references(batch.references), strict=True
         ):
             if not code.is_good():
                 raise RuntimeError(
-                    f"cannot add reference from {item.SourceNodeId.to_string()}: {code}"
+                    f"cannot add reference from {ref.SourceNodeId.to_string()}: {code}"
                 )
 
 
@@ -249,14 +252,14 @@ class RobotBuilder:
         return ua.QualifiedName(name, self.ours if ns is None else ns)
 
     def _id(self, path: str) -> ua.NodeId:
-        return ua.NodeId(path, self.ours)
+        return ua.node_id(path, self.ours)
 
     async def build(self, name: str, extras: tuple[str, ...]) -> RobotNodes:
         batch = NodeBatch(dry=self.template is not None)
         cell = self.cell
-        md_path = f"{cell.motion_devices.Identifier}.{name}"
-        ctrl_path = f"{cell.controllers.Identifier}.{name}"
-        safe_path = f"{cell.safety_states.Identifier}.{name}"
+        md_path = f"{ua.path_of(cell.motion_devices)}.{name}"
+        ctrl_path = f"{ua.path_of(cell.controllers)}.{name}"
+        safe_path = f"{ua.path_of(cell.safety_states)}.{name}"
         md = await self._add(
             batch,
             cell.motion_devices,
@@ -369,7 +372,7 @@ class RobotBuilder:
     async def _analog(
         self, batch: NodeBatch, parent: ua.NodeId, node_id: str, name: str
     ) -> ua.NodeId:
-        double = {"DataType": ua.NodeId(ua.ObjectIds.Double)}
+        double = {"DataType": ua.node_id(ua.ObjectIds.Double)}
         return await self._add(
             batch, parent, node_id, self._q(name), _ANALOG_UNIT, attributes=double
         )
@@ -390,7 +393,7 @@ class RobotBuilder:
             self._id(f"{path}.Software"),
             sw_path,
             self._q("KSS"),
-            ua.NodeId(DI_IDS["SoftwareType"], self.di),
+            ua.node_id(DI_IDS["SoftwareType"], self.di),
             optional=frozenset({"SoftwareRevision"}),
         )
         for key, prop in (
@@ -436,7 +439,7 @@ class RobotBuilder:
             node_id,
             self._q(name),
             _DATA_VARIABLE,
-            attributes={"DataType": ua.NodeId(data_type)},
+            attributes={"DataType": ua.node_id(data_type)},
         )
 
     async def _safety(self, batch: NodeBatch, nodes: RobotNodes, path: str) -> None:

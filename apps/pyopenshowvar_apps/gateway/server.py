@@ -29,9 +29,9 @@ from types import TracebackType
 from typing import Self
 from urllib.parse import urlsplit
 
-from asyncua import Server, ua
 from asyncua.common.connection import TransportLimits
 
+from . import ua
 from .cell import CellConfig
 from .live import Sink
 from .model import GATEWAY_URI, Instantiator, load_nodesets
@@ -39,6 +39,7 @@ from .poller import RobotPoller
 from .robotics import CellNodes, RobotBuilder, RobotNodes, build_cell
 from .security import LoginGuard, ensure_certificate, trust_check
 from .sessions import GatewayServer
+from .ua import Server
 from .writes import WRITE_METHOD, add_write_method
 
 __all__ = ["Gateway"]
@@ -135,8 +136,8 @@ class Gateway:
             poller = RobotPoller(robot, nodes, self.nodes, self.sink, robot.max_axis_speed, phase)
             self.pollers[robot.name] = poller
             if robot.writable:
-                method_id = ua.NodeId(
-                    f"{nodes.controller.Identifier}.{WRITE_METHOD}", ns[GATEWAY_URI]
+                method_id = ua.node_id(
+                    f"{ua.path_of(nodes.controller)}.{WRITE_METHOD}", ns[GATEWAY_URI]
                 )
                 await add_write_method(
                     server.get_node(nodes.controller), method_id, ns[GATEWAY_URI], poller

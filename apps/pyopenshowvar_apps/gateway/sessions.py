@@ -23,19 +23,20 @@ from __future__ import annotations
 import logging
 from typing import Any
 
-from asyncua import Server, ua
 from asyncua.server import server as _server_module
 from asyncua.server.binary_server_asyncio import BinaryServer, OPCUAProtocol
 from asyncua.server.uaprocessor import UaProcessor
-from asyncua.ua.ua_binary import struct_from_binary, uatcp_to_binary
+from asyncua.ua.ua_binary import struct_from_binary
 
+from . import ua
 from .security import VERDICT, LoginGuard, Verdict, _digest
+from .ua import Server
 
 __all__ = ["GatewayServer"]
 
 log = logging.getLogger(__name__)
 
-_ACTIVATE = ua.NodeId(ua.ObjectIds.ActivateSessionRequest_Encoding_DefaultBinary)
+_ACTIVATE = ua.node_id(ua.ObjectIds.ActivateSessionRequest_Encoding_DefaultBinary)
 #: what a locked-out client is told before its connection is closed
 _LOCKED = ua.StatusCodes.BadSecurityChecksFailed
 
@@ -50,11 +51,12 @@ class _Processor(UaProcessor):
 
     async def _process_message(self, typeid: Any, requesthdr: Any, seqhdr: Any, body: Any) -> Any:
         if typeid != _ACTIVATE:
-            return await super()._process_message(typeid, requesthdr, seqhdr, body)
+            # asyncua's UaProcessor._process_message has no annotations
+            return await super()._process_message(typeid, requesthdr, seqhdr, body)  # type: ignore[no-untyped-call]
         verdict = await self._verdict(requesthdr, body.copy())
         token = VERDICT.set(verdict)
         try:
-            return await super()._process_message(typeid, requesthdr, seqhdr, body)
+            return await super()._process_message(typeid, requesthdr, seqhdr, body)  # type: ignore[no-untyped-call]
         finally:
             VERDICT.reset(token)
 
@@ -93,7 +95,7 @@ class _Protocol(OPCUAProtocol):
         if self.processor is not None:  # asyncua's own, replaced before it saw a message
             processor = _Processor(self.iserver, transport, self.limits)
             processor.guard = self.guard
-            processor.set_policies(self.policies)
+            processor.set_policies(self.policies)  # type: ignore[no-untyped-call]  # unannotated in asyncua
             self.processor = processor
 
     def data_received(self, data: bytes) -> None:
@@ -103,8 +105,7 @@ class _Protocol(OPCUAProtocol):
         # an OPC UA Error message in answer to the client's Hello (sent before it, a client
         # may not be listening yet): it fails at once and says why; then the socket closes
         transport, self._refused = self._refused, None
-        error = ua.ErrorMessage(ua.StatusCode(_LOCKED), "too many failed logins; try later")
-        transport.write(uatcp_to_binary(ua.MessageType.Error, error))
+        transport.write(ua.error_frame(_LOCKED, "too many failed logins; try later"))
         transport.close()
 
 
@@ -127,7 +128,9 @@ class GatewayServer(Server):
     """asyncua's Server with the gateway's connections (see the module doc)."""
 
     def __init__(self, guard: LoginGuard) -> None:
-        super().__init__(user_manager=guard)
+        # asyncua annotates user_manager as its UserManager class but only calls get_user(),
+        # which LoginGuard has (a subclass would make .security import asyncua, which it defers)
+        super().__init__(user_manager=guard)  # type: ignore[arg-type]
         self.guard = guard
 
     async def start(self) -> None:
@@ -139,7 +142,7 @@ class GatewayServer(Server):
                 self.guard = guard
 
         # asyncua's Server.start() builds its BinaryServer by this module-level name
-        original = _server_module.BinaryServer  # type: ignore[attr-defined]
+        original = _server_module.BinaryServer  # type: ignore[attr-defined]  # imported, not exported
         setattr(_server_module, "BinaryServer", Bound)  # noqa: B010 - a module attribute
         try:
             await super().start()

@@ -187,8 +187,10 @@ def cell_file(
 async def open_client(gw: GatewayProcess, folder: Path, user: str = "", password: str = "") -> Any:
     """A connected asyncua client: anonymous, or (security on) Basic256Sha256 Sign&Encrypt
     with a certificate of its own and ``user``/``password``."""
-    from asyncua import Client, ua
     from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
+
+    from . import ua
+    from .ua import Client
 
     client = Client(gw.url, timeout=30)
     if gw.fingerprint:
@@ -207,12 +209,13 @@ async def open_client(gw: GatewayProcess, folder: Path, user: str = "", password
 def client_certificate(folder: Path, uri: str, name: str = "abuser") -> tuple[Path, Path]:
     """A client application certificate and key (self-signed) in ``folder``."""
     from asyncua.crypto import cert_gen
+    from cryptography import x509
     from cryptography.hazmat.primitives import serialization
     from cryptography.x509.oid import ExtendedKeyUsageOID
 
     key = cert_gen.generate_private_key()
     cert = cert_gen.generate_self_signed_app_certificate(
-        key, "abuse client", {}, [cert_gen.x509.UniformResourceIdentifier(uri)],
+        key, "abuse client", {}, [x509.UniformResourceIdentifier(uri)],
         extended=[ExtendedKeyUsageOID.CLIENT_AUTH],
     )  # fmt: skip
     cert_path, key_path = folder / f"{name}-cert.der", folder / f"{name}-key.pem"
@@ -240,8 +243,7 @@ class Watch:
         self.read_errors = 0
 
     async def start(self) -> None:
-        from asyncua import ua
-
+        from . import ua
         from .model import GATEWAY_URI
 
         ns = await self.client.get_namespace_index(GATEWAY_URI)
@@ -249,7 +251,7 @@ class Watch:
         nodes = []
         for robot in self.robots:
             for axis in range(1, 7):
-                nid = ua.NodeId(
+                nid = ua.node_id(
                     f"{self.cell}.MotionDevices.{robot}.Axes.A{axis}.ParameterSet.ActualPosition",
                     ns,
                 )

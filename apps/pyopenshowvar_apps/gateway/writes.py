@@ -26,11 +26,10 @@ from __future__ import annotations
 import logging
 from typing import Any
 
-from asyncua import ua
-
 from pyopenshowvar import KvpError
 from pyopenshowvar_apps.writecheck import RefusedWrite, check_literal, checked_write
 
+from . import ua
 from .poller import RobotPoller
 
 __all__ = ["WRITE_METHOD", "WriteError", "add_write_method", "write_variable"]
@@ -101,12 +100,12 @@ async def add_write_method(node: Any, method_id: ua.NodeId, ns: int, poller: Rob
         try:
             echo, stop = await write_variable(poller, variable.Value, value.Value)
         except WriteError as exc:
-            return ua.StatusCode(exc.code)
+            return ua.status_code(exc.code)
         return [ua.Variant(echo, ua.VariantType.String), ua.Variant(stop, ua.VariantType.String)]
 
     def arg(name: str, text: str) -> ua.Argument:
         a = ua.Argument()
-        a.Name, a.DataType, a.ValueRank = name, ua.NodeId(ua.ObjectIds.String), -1
+        a.Name, a.DataType, a.ValueRank = name, ua.node_id(ua.ObjectIds.String), -1
         a.Description = ua.LocalizedText(text)
         return a
 

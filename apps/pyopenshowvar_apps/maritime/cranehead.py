@@ -182,7 +182,7 @@ def _pid_motor(
     output is that rest plus the zero-state response to the inputs' departure from it,
     filtered as transfer functions (scipy.signal.ss2tf, lfilter).
     """
-    from scipy.signal import lfilter, ss2tf  # type: ignore[import-untyped]
+    from scipy.signal import lfilter, ss2tf
 
     kp, ki, kd, k, tm, dt = cfg.kp, cfg.ki, cfg.kd, cfg.k_dc, cfg.t_dc, cfg.dt
     g = 1.0 / (1.0 + kd * k / tm)

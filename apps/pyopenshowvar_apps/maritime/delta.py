@@ -164,7 +164,7 @@ class Workspace:
     @cached_property
     def hull(self) -> object:
         """scipy's ConvexHull of the reachable points (the paper's workspace limits)."""
-        from scipy.spatial import ConvexHull  # type: ignore[import-untyped]
+        from scipy.spatial import ConvexHull
 
         return ConvexHull(self.points)
 

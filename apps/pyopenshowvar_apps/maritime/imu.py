@@ -52,7 +52,7 @@ class Channel:
             if math.isinf(self.tau):
                 d = np.cumsum(w * self.drift * np.sqrt(dt)[:, None], axis=0)
             else:
-                from scipy.signal import lfilter  # type: ignore[import-untyped]
+                from scipy.signal import lfilter
 
                 # d_i = a d_{i-1} + q w_i on a uniform grid; q keeps the stationary σ = drift
                 a = math.exp(-float(np.median(dt[1:])) / self.tau)

@@ -86,7 +86,7 @@ class SeaState:
 
     def density(self, omega: npt.ArrayLike) -> FloatArray:
         """S(ω) in m²·s/rad at the frequencies ``omega`` (rad/s, > 0)."""
-        import waveresponse as wr  # type: ignore[import-untyped]
+        import waveresponse as wr
 
         w = np.asarray(omega, dtype=np.float64)
         if self.hs == 0.0:
