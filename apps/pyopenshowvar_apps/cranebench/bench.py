@@ -117,12 +117,16 @@ def run_once(
         q_a = plant.q
         if k % every == 0:
             ramp_from = theta_c
+            # the solver works in the local workspace: it sees the crane without the
+            # compensation currently applied (an iterative solver stopped by its budget would
+            # otherwise return part of δθ, which would then be added again)
+            q_s = np.clip(q_a - dtheta_prev, arm.lower, arm.upper)
             if run.mode == "position":
-                theta_c = solver.position(x_d[k], q_a)
+                theta_c = solver.position(x_d[k], q_s)
             else:
                 ahead = x_d[min(k + every, n - 1)]
                 span = every * dt
-                theta_c = q_a + solver.velocity(q_a, (ahead - x_d[k]) / span, span) * span
+                theta_c = q_s + solver.velocity(q_s, (ahead - x_d[k]) / span, span) * span
             solve_ms[k] = 1000.0 * solver.last.time_s
             x_t = x_d[k]  # eq. 5.3: the target the solver was given
             rate = (theta_c - ramp_from) / (every * dt)
