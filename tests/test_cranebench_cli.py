@@ -58,6 +58,13 @@ def test_kvp_crane_bench_json_keys_and_figures_from_its_csv(tmp_path: Path) -> N
     a = np.linalg.norm(xt - xc, axis=1)
     assert math.sqrt(np.mean(a**2)) == pytest.approx(m["position_error_mm"]["rms"], rel=1e-9)
     assert a.max() == pytest.approx(m["position_error_mm"]["max"], rel=1e-9)
+    # eq. 5.4 against the joint target of the sample the solver was given (every 5th: 0.1 s)
+    held = (np.arange(len(c["t"])) // 5) * 5
+    theta_t = np.stack([c[f"theta_t_{j}"] for j in ("slew", "boom", "jib")], 1)[held]
+    theta_c = np.stack([c[f"theta_c_{j}"] for j in ("slew", "boom", "jib")], 1)
+    b = np.linalg.norm(theta_t - theta_c, axis=1)
+    assert b.max() == pytest.approx(m["joint_error_deg"]["max"], rel=1e-9)
+    assert math.sqrt(np.mean(b**2)) == pytest.approx(m["joint_error_deg"]["rms"], rel=1e-9)
     for j in ("slew", "boom", "jib"):
         effort = np.trapezoid(0.5 * c[f"tau_{j}"] ** 2, c["t"])
         assert effort == pytest.approx(m["joint_effort"][j], rel=1e-9)
