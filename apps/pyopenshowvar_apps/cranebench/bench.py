@@ -1,8 +1,9 @@
 """The benchmark loop: one run of a profile, one solver, on the plant, calm or on a ship.
 
 Per sample (``log_period_s``, 50 Hz by default): every ``control_period_s`` the solver maps
-the target ``x_d`` to joint angles ``θ_c`` (position mode, eq. 2.9) or to joint speeds
-(velocity mode, eq. 2.10; then ``θ_c = θ_a + θ̇·Δt``), from the plant's actual angles θ_a;
+the target ``x_d`` to joint angles ``θ_c`` from the plant's actual angles θ_a (position mode,
+eq. 2.9), or the speed towards the next target sample to joint speeds integrated into the
+previous command (velocity mode, eq. 2.10: ``θ_c ← θ_c + θ̇·Δt``);
 ``x_c`` is the description's forward kinematics of θ_c (the thesis' "calculated" position).
 A joint PI loop (the thesis' "PID regulation") turns ``θ_c − θ_a`` into valve commands, by
 the controller's own nominal full-spool speeds (as set at commissioning, not the plant's
@@ -123,12 +124,15 @@ def run_once(
             q_s = np.clip(q_a - dtheta_prev, arm.lower, arm.upper)
             if run.mode == "position":
                 theta_c = solver.position(x_d[k], q_s)
+                x_t = x_d[k]  # eq. 5.3: the target the solver was given
             else:
-                ahead = x_d[min(k + every, n - 1)]
-                span = every * dt
-                theta_c = q_s + solver.velocity(q_s, (ahead - x_d[k]) / span, span) * span
+                # velocity mode integrates the server's own command (its θ_a is the
+                # commanded configuration, as a servoed arm reports it), steering towards
+                # the next target sample: x_t = x_c + ẋ·Δt
+                x_t, span = x_d[min(k + every, n - 1)], every * dt
+                xdot = (x_t - solver.fk(theta_c)) / span
+                theta_c = theta_c + solver.velocity(theta_c, xdot, span) * span
             solve_ms[k] = 1000.0 * solver.last.time_s
-            x_t = x_d[k]  # eq. 5.3: the target the solver was given
             rate = (theta_c - ramp_from) / (every * dt)
         # the valves follow θ_c as a ramp over the control period (first-order hold), its
         # rate fed forward: a step every 0.1 s would only jerk the hydraulics
