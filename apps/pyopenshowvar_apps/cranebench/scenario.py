@@ -24,13 +24,13 @@ import numpy.typing as npt
 
 from pyopenshowvar.arms import Arm
 
+from .plant import G
 from .profiles import ProfileError, Run
 
 __all__ = ["R_BC", "Ship", "joint_path", "ship"]
 
 FloatArray = npt.NDArray[np.float64]
 R_BC = np.diag([1.0, -1.0, -1.0])
-G = 9.81
 
 
 def _min_jerk(s: FloatArray) -> FloatArray:
