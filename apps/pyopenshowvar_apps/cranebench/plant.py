@@ -10,11 +10,12 @@ a test checks they agree with the D-H description (the same crane described twic
 
 Each joint is driven by a MuJoCo velocity actuator whose gain is the oil column's damping in
 joint space (``c_h·r(q)²``) and whose force range is the relief valve's torque range at the
-current angle; both follow the lever geometry (updated at the controller's 50 Hz), so the joint
-torque is exactly the cylinder force times its lever arm; the valves' first-order lag is
-MuJoCo's ``filter`` actuator dynamics on the flow the spool command asks for (the joint speed
-``Q/(A·r)``, piston or annulus area by the command's sign). A moving ship enters as the effective gravity in the crane's base
-frame, ``g_eff = Rᵀ(g − a)`` (see :meth:`CranePlant.set_gravity`).
+current angle; both follow the lever geometry (updated at the controller's 50 Hz), so the
+joint torque is exactly the cylinder force times its lever arm. The valves' first-order lag
+is MuJoCo's ``filter`` actuator dynamics on the flow the spool command asks for (the joint
+speed ``Q/(A·r)``, piston or annulus area by the command's sign). A moving ship enters as the
+effective gravity in the crane's base frame, ``g_eff = Rᵀ(g − a)`` (see
+:meth:`CranePlant.set_gravity`).
 """
 
 from __future__ import annotations
