@@ -224,26 +224,25 @@ class _RunQueueWait:
 
 
 class _OtherThreadsWait:
-    """Nanoseconds the process's other threads have waited for a core so far, summed over
-    those alive now. The event loop hands sliced work (slices.py) to a worker thread and waits
-    for it, so the worker's wait for a core is the loop's too. A thread that ended takes its
-    count along: the sum then drops, which only makes a round trip look longer, never shorter.
-    """
+    """Nanoseconds the process's other threads have waited for a core so far. The event loop
+    hands sliced work (slices.py) to a worker thread and waits for it, so the worker's wait for
+    a core is the loop's too. A thread that ended counts with the last figure read of it (never
+    more than it waited: a round trip may look longer, never shorter)."""
 
     def __init__(self, pid: int) -> None:
         self.pid = pid
+        self.seen: dict[str, int] = {}
 
     def __call__(self) -> int:
-        total = 0
         for tid in os.listdir(f"/proc/{self.pid}/task"):
             if tid == str(self.pid):
                 continue  # the main thread: its own _RunQueueWait
             try:
                 with open(f"/proc/{self.pid}/task/{tid}/schedstat", "rb") as f:
-                    total += int(f.read().split()[1])
+                    self.seen[tid] = int(f.read().split()[1])
             except (FileNotFoundError, ProcessLookupError, IndexError):
                 pass  # ended meanwhile
-        return total
+        return sum(self.seen.values())
 
     def close(self) -> None:
         pass
