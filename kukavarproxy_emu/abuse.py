@@ -183,8 +183,8 @@ class ProbeResult:
     errors: int = 0
     notes: list[str] = field(default_factory=list)
     #: With the emulator's process id (else 0): each round trip less the time the emulator's
-    #: event-loop thread and the probe spent waiting for a core (their run-queue delays,
-    #: Linux schedstats), ms. On an idle machine it is the round trip; on a busy one it
+    #: threads (its event loop and the worker it hands sliced work to, which run in turn) and
+    #: the probe spent waiting for a core (their run-queue delays, Linux schedstats), ms. On an idle machine it is the round trip; on a busy one it
     #: still shows what the emulator did (or failed to do) before it answered: its own work,
     #: the others' work it did first, and any time it sat idle with the request unanswered.
     net_p50_ms: float = 0.0
@@ -223,6 +223,31 @@ class _RunQueueWait:
         os.close(self.fd)
 
 
+class _OtherThreadsWait:
+    """Nanoseconds the process's other threads have waited for a core so far. The event loop
+    hands sliced work (slices.py) to a worker thread and waits for it, so the worker's wait for
+    a core is the loop's too. A thread that ended counts with the last figure read of it (never
+    more than it waited: a round trip may look longer, never shorter)."""
+
+    def __init__(self, pid: int) -> None:
+        self.pid = pid
+        self.seen: dict[str, int] = {}
+
+    def __call__(self) -> int:
+        for tid in os.listdir(f"/proc/{self.pid}/task"):
+            if tid == str(self.pid):
+                continue  # the main thread: its own _RunQueueWait
+            try:
+                with open(f"/proc/{self.pid}/task/{tid}/schedstat", "rb") as f:
+                    self.seen[tid] = int(f.read().split()[1])
+            except (FileNotFoundError, ProcessLookupError, IndexError):
+                pass  # ended meanwhile
+        return sum(self.seen.values())
+
+    def close(self) -> None:
+        pass
+
+
 def run_probe(
     host: str,
     port: int,
@@ -246,9 +271,10 @@ def run_probe(
     net_samples: list[float] = []
     cpu_samples: list[float] = []
     clock = cpu_clock(emulator_pid) if emulator_pid is not None else None
-    waits = []
+    waits: list[_RunQueueWait | _OtherThreadsWait] = []
     if emulator_pid is not None:  # the emulator's event loop runs in its main thread
         waits = [_RunQueueWait(f"/proc/{emulator_pid}/schedstat"),
+                 _OtherThreadsWait(emulator_pid),
                  _RunQueueWait("/proc/thread-self/schedstat")]  # fmt: skip
     sock = socket.create_connection((host, port), timeout=2.0)
     sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)

@@ -84,27 +84,53 @@ async def _open(
 
 
 def run_abuse(
-    emu: EmulatorProcess, abusers: Sequence[Abuser], seconds: float
+    emu: EmulatorProcess,
+    abusers: Sequence[Abuser],
+    seconds: float,
+    *,
+    done: Callable[[AbuseTally], bool] | None = None,
+    patience: float = 40.0,
+    min_requests: int = 0,
 ) -> tuple[ProbeResult, AbuseTally, float]:
     """The bystander (its own process) and ``abusers`` (this process) against ``emu`` for
-    ``seconds``: (what the bystander saw, what the abusers counted, the emulator's peak RSS
-    growth in MB during the abuse). An abuser that raises counts as an error."""
+    ``seconds``, then until ``done(tally)`` (at most ``patience`` more seconds: a loaded
+    machine makes the abuse longer, never the abusers' counts smaller), the bystander timing
+    at least ``min_requests`` round trips: (what the bystander saw, what the abusers counted,
+    the emulator's peak RSS growth in MB during the abuse). An abuser that raises counts as an
+    error. The bystander's result has the net round trips and the emulator's CPU time too
+    (``net_*``, ``cpu_*``)."""
     peak = PeakRss(emu.pid)
     before = peak.reset()
     tally = AbuseTally()
-    probe = start_probe(emu.host, emu.port, seconds, "ABUSE_PROBE")
+    probe = start_probe(
+        emu.host,
+        emu.port,
+        seconds + patience + 30.0,  # a cap only: it is stopped below
+        "ABUSE_PROBE",
+        emulator_pid=emu.pid,
+        until_stopped=True,
+        min_requests=min_requests,
+    )
 
-    async def attack() -> None:
+    async def attack() -> ProbeResult:
         tasks = [asyncio.create_task(a(emu.host, emu.port, tally)) for a in abusers]
         await asyncio.sleep(seconds)
+        end = asyncio.get_running_loop().time() + patience
+        # polled: the abusers bump plain counters, there is no event to wait on; what fell
+        # short is for the caller's checks of the tally to say
+        while done is not None and not done(tally) and asyncio.get_running_loop().time() < end:  # noqa: ASYNC110
+            await asyncio.sleep(0.05)
+        # the bystander ends once it has its sample, the abusers still at it
+        result = await asyncio.to_thread(probe.result)
         for task in tasks:
             task.cancel()
         for outcome in await asyncio.gather(*tasks, return_exceptions=True):
             if isinstance(outcome, Exception):
                 tally.errors += 1
+        return result
 
-    asyncio.run(attack())
-    return probe.result(), tally, peak.peak_mb() - before
+    result = asyncio.run(attack())
+    return result, tally, peak.peak_mb() - before
 
 
 async def in_flood(

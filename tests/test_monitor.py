@@ -220,10 +220,13 @@ async def test_fast_typing_into_the_edit_and_add_dialogs_loses_nothing(
         burst(app, "e", "7", "8", "backspace", "9", "enter")
         await until(pilot, lambda: emulator.store.read("MYINT") == "79")
         burst(app, "e", "5", "escape")
-        await pilot.pause(0.3)
-        assert emulator.store.read("MYINT") == "79" and app.screen is app.screen_stack[0]
+        await until(pilot, lambda: app.screen is app.screen_stack[0], timeout=20.0)
         burst(app, "a", *"$OV_JOG", "enter")
-        await until(pilot, lambda: app.watchlist.names == ["MYINT", "$OV_JOG"])
+        await until(pilot, lambda: app.watchlist.names == ["MYINT", "$OV_JOG"], timeout=20.0)
+        # a read of $OV_JOG answered: any write the cancelled edit had sent went before it on
+        # the same connection, so MYINT now shows whether Escape wrote (an event, not a pause)
+        await until(pilot, lambda: app.state.watch.get("$OV_JOG") is not None, timeout=20.0)
+        assert emulator.store.read("MYINT") == "79"
 
 
 def test_the_noise_estimate_ignores_smooth_motion() -> None:

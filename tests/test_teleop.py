@@ -141,10 +141,29 @@ async def test_teleoperation_tracks_on_the_emulator(emulator_factory, mode, tmp_
     assert m["motion_range_mm"] > 50.0, m
     target = np.stack([col[f"target_{a}"] for a in "xyz"], axis=1)
     actual = np.stack([col[f"actual_{a}"] for a in "xyz"], axis=1)
+    lag, shifted, keep = _align(t, target, actual)
     moved = np.ptp(target, axis=0) > 20.0
-    corr = [np.corrcoef(target[:, i], actual[:, i])[0, 1] for i in np.flatnonzero(moved)]
-    assert min(corr) > 0.8, (corr, m)
-    assert m["rms_after_lag_mm"] < 0.5 * m["motion_range_mm"], m
+    corr = [np.corrcoef(shifted[keep, i], actual[keep, i])[0, 1] for i in np.flatnonzero(moved)]
+    assert min(corr) > 0.8, (corr, lag, m)
+    rms = float(np.sqrt(np.mean(np.sum((shifted - actual)[keep] ** 2, axis=1))))
+    assert rms < 0.5 * m["motion_range_mm"], (rms, lag, m)
+
+
+def _align(
+    t: np.ndarray, target: np.ndarray, actual: np.ndarray
+) -> tuple[float, np.ndarray, np.ndarray]:
+    """The delay that best aligns ``actual`` with ``target`` (least squares), the target
+    delayed by it and the samples it leaves to compare. The lag itself is timing (the app
+    reports it, searching 0–0.5 s); here it may be up to half the run, as long as a loaded
+    machine makes it: the loop rate and the emulator's ticks decide it, not the app."""
+    best, best_err = 0.0, np.inf
+    for lag in np.arange(0.0, 0.5 * (t[-1] - t[0]), 0.004):
+        shifted = np.stack([np.interp(t - lag, t, c) for c in target.T], axis=1)
+        err = float(np.mean(np.sum((shifted - actual)[t > t[0] + lag] ** 2, axis=1)))
+        if err < best_err:
+            best, best_err = float(lag), err
+    shifted = np.stack([np.interp(t - best, t, c) for c in target.T], axis=1)
+    return best, shifted, t > t[0] + best
 
 
 @pytest.mark.timeout(40)

@@ -16,6 +16,7 @@ from pyopenshowvar_apps.universal.sim import SimulatedArm
 from pyopenshowvar_apps.universal.web import ViewServer, WebInput
 from test_web_browser import _wait_js, browser  # noqa: F401 - the Chromium fixture
 
+from kukavarproxy_emu.testing import wait_until
 from pyopenshowvar.arms import load_arm
 
 SHOT = Path(__file__).resolve().parents[1] / "docs" / "universal.png"
@@ -42,11 +43,14 @@ async def test_universal_page_in_chromium(browser: Any) -> None:  # noqa: F811
             box = await button.bounding_box()
             await page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
             await page.mouse.down()
-            await asyncio.sleep(0.8)
-            assert server.ticks[-1].signal[2] > 0
+            # events, not sleeps: a loaded machine takes longer to send, tick and move
+            await wait_until(lambda: server.ticks[-1].signal[2] > 0, 20, what="the held button")
+            await wait_until(
+                lambda: server.ticks[-1].tip[2] - tip0[2] > 100.0, 20, what="the crane's tip up"
+            )
             await page.mouse.up()
-            await asyncio.sleep(0.8)
-            assert np.all(server.ticks[-1].signal == 0) and server.ticks[-1].alive
+            await wait_until(lambda: np.all(server.ticks[-1].signal == 0), 20, what="let go")
+            assert server.ticks[-1].alive
             assert server.ticks[-1].tip[2] - tip0[2] > 100.0  # the crane's tip went up
             await page.screenshot(path=str(SHOT))
             assert not errors, errors

@@ -99,6 +99,13 @@ def test_closed_form_reachability_agrees_with_the_numeric_ik() -> None:
         assert np.array_equal(exact, numeric), name
 
 
+#: What the 20 ms budget buys the GA and the PSO on our machine (generations, iterations):
+#: their accuracy is checked after this many, a count no load can shrink; how many the budget
+#: buys on a machine is a speed figure (bench/universal_solvers.py, docs/universal.md: 13–19
+#: generations; the PSO's w, c1, c2 were tuned at 50 iterations).
+FIXED = {"ga": {"max_generations": 13}, "pso": {"max_iterations": 50}}
+
+
 @pytest.mark.parametrize("name", THESIS_ARMS)
 def test_each_solver_reaches_reachable_targets_within_its_stated_error_and_budget(
     name: str,
@@ -107,13 +114,24 @@ def test_each_solver_reaches_reachable_targets_within_its_stated_error_and_budge
     rng = np.random.default_rng(4)
     targets_q = rng.uniform(arm.lower, arm.upper, (12, arm.dof))
     for solver_name in solver_names(arm):
-        solver = make_solver(solver_name, arm, seed=5, budget=BUDGET, clock=time.process_time)
+        # the budget, on this thread's CPU time: every solver stops within it (+ one step)
+        solver = make_solver(solver_name, arm, seed=5, budget=BUDGET, clock=time.thread_time)
+        q = arm.home_q.copy()
+        for goal in targets_q:
+            q = solver.position(solver.fk(goal), q)
+            assert arm.within_limits(q)
+            assert solver.last.time_s <= BUDGET + OVERRUN, (solver_name, solver.last)
+        # the stated error, after what the budget buys (the GA and the PSO: FIXED)
+        fixed = FIXED.get(solver_name, {})
+        solver = make_solver(solver_name, arm, seed=5, budget=BUDGET, clock=time.thread_time,
+                             **fixed)  # fmt: skip
         q = arm.home_q.copy()
         errors = []
         for goal in targets_q:
             q = solver.position(solver.fk(goal), q)
             assert arm.within_limits(q)
-            assert solver.last.time_s <= BUDGET + OVERRUN, (solver_name, solver.last)
+            if not fixed:
+                assert solver.last.time_s <= BUDGET + OVERRUN, (solver_name, solver.last)
             # the arm's own FK, not the solver's
             errors.append(np.linalg.norm(arm.fk(q)[:3, 3] - solver.fk(goal)))
         pct = 100.0 * np.array(errors) / solver.workspace.scale

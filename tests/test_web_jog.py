@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import socket
 from collections.abc import AsyncIterator
 from typing import Any
 
@@ -401,27 +402,42 @@ async def test_abuse_is_bounded(rig: tuple[Emulator, WebServer]) -> None:
     await ws.send(json.dumps({"t": "nope"}))  # a JSON object a page does not send: an error
     await ws.send(json.dumps({"t": "jog", "press": 1, "frame": "axis", "key": "Q9", "dir": 1}))
     errors = 0
-    async with asyncio.timeout(5):
+    async with asyncio.timeout(20):
         while errors < 3:
             errors += json.loads(await ws.recv())["t"] == "error"
     big = await page(web)
     await big.send("x" * 10_000)  # larger than MAX_MESSAGE: the connection is closed
     with pytest.raises(websockets.exceptions.ConnectionClosed):
-        async with asyncio.timeout(5):
+        async with asyncio.timeout(20):
             while True:
                 await big.recv()
     flood = await page(web)
     with pytest.raises(websockets.exceptions.ConnectionClosed):
-        async with asyncio.timeout(5):
+        async with asyncio.timeout(20):
             for _ in range(5000):  # far beyond the per-connection message budget
                 await flood.send('{"t": "watch", "names": []}')
             while True:
                 await flood.recv()
     # The well-behaved page is still served
-    async with asyncio.timeout(5):
+    async with asyncio.timeout(20):
         while json.loads(await ws.recv())["t"] != "state":
             pass
     await ws.close()
+
+
+async def test_a_robot_that_is_not_there_shows_as_a_state() -> None:
+    """The state of a link that is connecting or lost is a ``state`` message too: the page
+    shows only those (its banner says why the robot is not there)."""
+    with socket.socket() as free:  # a port nobody listens on
+        free.bind(("127.0.0.1", 0))
+        port = free.getsockname()[1]
+    async with WebServer("127.0.0.1", port, token=TOKEN, emulated=True) as web:
+        ws = await page(web)
+        async with asyncio.timeout(10):
+            state = json.loads(await ws.recv())
+        assert state["t"] == "state" and state["link"]["connected"] is False, state
+        assert state["link"]["error"], state
+        await ws.close()
 
 
 async def test_loopback_without_token_refuses_other_host_names() -> None:

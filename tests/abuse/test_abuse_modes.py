@@ -14,14 +14,17 @@ robust framing, whose per-iteration work budget is the emulator's own promise (`
 docs/emulator.md "Bounds"). Under every abuse here the bystander's p99 must stay within
 ``bound(reference)`` — 20 ms on a quiet machine — which fails by far when one abuser stalls
 the event loop (a blocking 64 KiB select left the bystander without an answer for seconds, a
-kvp9 flood held it 110 ms where the robust mode held it 3 ms).
+kvp9 flood held it 110 ms where the robust mode held it 3 ms). Both p99s are of the *net*
+round trips (:class:`kukavarproxy_emu.abuse.ProbeResult`: less the time the emulator's event
+loop and the bystander waited for a core), as in ``test_abuse_emulator.py``: the time other
+processes of a loaded machine take is not the emulator's, a stalled event loop still is.
 """
 
 from __future__ import annotations
 
 import asyncio
 import sys
-from collections.abc import Coroutine, Iterator
+from collections.abc import Callable, Coroutine, Iterator
 from typing import Any
 
 import pytest
@@ -44,6 +47,7 @@ pytestmark = [
 ]
 
 SECONDS = 2.5
+MIN_REQUESTS = 60
 PEAK_GROWTH_MB = 50.0
 P99_MS = 20.0
 CONFIG = "DEFDAT $CONFIG\nDECL INT ABUSE_PROBE=0\nENDDAT\n"
@@ -57,20 +61,26 @@ def bound(reference_p99: float) -> float:
 
 
 def run_abuse(
-    emu: EmulatorProcess, abusers: list[Abuser], seconds: float = SECONDS
+    emu: EmulatorProcess,
+    abusers: list[Abuser],
+    seconds: float = SECONDS,
+    done: Callable[[AbuseTally], bool] | None = None,
 ) -> tuple[ProbeResult, AbuseTally, float]:
-    return abuse_modes.run_abuse(emu, abusers, seconds)
+    """The abuse for ``seconds`` and then until ``done(tally)``: a slow machine makes a
+    scenario longer, never its counts smaller; the bystander times at least MIN_REQUESTS."""
+    return abuse_modes.run_abuse(emu, abusers, seconds, done=done, min_requests=MIN_REQUESTS)
 
 
 def check_bystander(result: ProbeResult, growth: float, limit_ms: float, what: str) -> None:
     print(
         f"{what}: bystander p50/p99/max {result.p50_ms:.1f}/{result.p99_ms:.1f}/"
-        f"{result.max_ms:.1f} ms over {result.requests} requests (p99 bound {limit_ms:.1f} ms),"
+        f"{result.max_ms:.1f} ms (net p99 {result.net_p99_ms:.1f} ms) over {result.requests}"
+        f" requests (net p99 bound {limit_ms:.1f} ms),"
         f" peak RSS growth {growth:+.1f} MB"
     )
     assert result.errors == 0 and result.wrong == 0, result.notes
-    assert result.requests > 50, result
-    assert result.p99_ms <= limit_ms, (what, result, limit_ms)
+    assert result.requests >= MIN_REQUESTS, result
+    assert result.net_p99_ms <= limit_ms, (what, result, limit_ms)
     assert growth <= PEAK_GROWTH_MB, growth
 
 
@@ -104,13 +114,13 @@ def kvp9(config: str) -> Iterator[EmulatorProcess]:
 
 @pytest.fixture(scope="module")
 def reference(config: str) -> float:
-    """The bystander's p99 (ms) under the reference flood (see the module docstring)."""
+    """The bystander's net p99 (ms) under the reference flood (see the module docstring)."""
     for emu in _emulator("--config", config, "--max-clients", "30"):
-        result, tally, _ = run_abuse(emu, [in_flood] * 10)
+        result, tally, _ = run_abuse(emu, [in_flood] * 10, done=lambda t: t.replies > 500)
         assert result.errors == 0 and result.wrong == 0, result.notes
         assert tally.errors == 0 and tally.wrong == 0 and tally.replies > 500, tally
-        print(f"reference (robust mode, $IN[] flood): bystander p99 {result.p99_ms:.1f} ms")
-    return result.p99_ms
+        print(f"reference (robust mode, $IN[] flood): bystander net p99 {result.net_p99_ms:.1f} ms")
+    return result.net_p99_ms
 
 
 # ------------------------------------------------------------------------ --wire kvp9
@@ -122,7 +132,7 @@ def test_kvp9_flood_of_whole_array_reads_is_bounded_like_the_robust_mode(
     """The reference flood against the wire-faithful mode: it keeps the robust mode's
     per-iteration budget, so the bystander fares as there (it used to see a p99 of 110 ms
     against the robust mode's 3 ms on a quiet machine)."""
-    result, tally, growth = run_abuse(kvp9, [in_flood] * 10)
+    result, tally, growth = run_abuse(kvp9, [in_flood] * 10, done=lambda t: t.replies > 500)
     check_bystander(result, growth, bound(reference), "kvp9 $IN[] flood")
     # the flooders are served too (not dropped: they read their replies), none saw a wrong one
     assert tally.errors == 0 and tally.wrong == 0 and tally.replies > 500, tally
@@ -133,7 +143,7 @@ def test_kvp9_garbage_and_clients_that_do_not_read(reference: float, kvp9: Emula
         lambda h, p, t, seed=seed: garbage(h, p, t, seed=seed) for seed in range(2)
     ]
     abusers += [non_reader] * 4
-    result, tally, growth = run_abuse(kvp9, abusers)
+    result, tally, growth = run_abuse(kvp9, abusers, done=lambda t: t.errors >= 4)
     check_bystander(result, growth, bound(reference), "kvp9 garbage + non-readers")
     # KVP drops a client that does not read (its failed Write): each non-reader ends in an
     # error of its own, and nothing else does (garbage never closes a kvp9 connection)
@@ -155,7 +165,7 @@ def test_c3_selects_of_a_64_kib_module_do_not_stall_other_clients(
     def selects(h: str, p: int, t: AbuseTally) -> Coroutine[Any, Any, None]:
         return c3_selects(h, p, t, module=MODULE)
 
-    result, tally, growth = run_abuse(c3, [selects] * 8)
+    result, tally, growth = run_abuse(c3, [selects] * 8, done=lambda t: t.replies >= 1)
     check_bystander(result, growth, bound(reference), "C3 64 KiB selects")
     # every answer the selecting clients got was a success with their tag; at least one
     # select went through in the time (about 0.2 s of work each; more on a loaded machine)
@@ -168,7 +178,7 @@ def test_c3_malformed_messages_and_long_names(reference: float, c3: EmulatorProc
         lambda h, p, t, seed=seed: c3_garbage(h, p, t, seed=seed) for seed in range(3)
     ]
     abusers.append(long_names)
-    result, tally, growth = run_abuse(c3, abusers)
+    result, tally, growth = run_abuse(c3, abusers, done=lambda t: t.replies >= 20)
     check_bystander(result, growth, bound(reference), "C3 malformed messages")
     # C3 Bridge answers every message of a handled type, malformed or not: no connection of
     # the garbage clients was closed on them, every reply carried its tag
@@ -179,7 +189,7 @@ def test_c3_malformed_messages_and_long_names(reference: float, c3: EmulatorProc
 
 
 def test_c3_clients_that_do_not_read(reference: float, c3: EmulatorProcess) -> None:
-    result, tally, growth = run_abuse(c3, [non_reader] * 8)
+    result, tally, growth = run_abuse(c3, [non_reader] * 8, done=lambda t: t.requests >= 8 * 200)
     check_bystander(result, growth, bound(reference), "C3 non-readers")
     # output backpressure: the emulator stops reading them, never drops or grows
     assert tally.errors == 0 and tally.connections == 8, tally

@@ -53,8 +53,16 @@ class InputDialog(ModalScreen[str | None]):
             yield Label("Enter: OK   Esc: cancel", classes="hint")
 
     def on_mount(self) -> None:
+        if self._typed:  # keys typed ahead while the input was being composed: into it
+            self._type_into(self.query_one("#answer", Input), self.value)
         if self._answered is not None:
             self._finish(self._answered)
+
+    @staticmethod
+    def _type_into(answer: Input, text: str) -> None:
+        answer.select_on_focus = False
+        answer.value = text
+        answer.cursor_position = len(text)
 
     def type_ahead(self, event: events.Key) -> bool:
         """Type a key that was pressed before the input had the focus into it; False when it
@@ -67,7 +75,9 @@ class InputDialog(ModalScreen[str | None]):
         replaces the value shown (the input selects it when it gets the focus), Backspace
         deletes, Enter answers, Escape cancels.
         """
-        answer = self.query("#answer").first(Input) if self.is_mounted else None
+        # the input exists once the dialog is mounted, and until it is taken down
+        found = self.query("#answer") if self.is_mounted else None
+        answer = found.first(Input) if found else None
         text = answer.value if answer is not None else self.value
         if event.key in ("enter", "escape"):
             if answer is None:
@@ -85,9 +95,7 @@ class InputDialog(ModalScreen[str | None]):
         if answer is None:
             self.value = text
         else:
-            answer.select_on_focus = False
-            answer.value = text
-            answer.cursor_position = len(text)
+            self._type_into(answer, text)
         return True
 
     def on_key(self, event: events.Key) -> None:

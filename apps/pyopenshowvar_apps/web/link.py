@@ -86,7 +86,10 @@ class RobotLink:
         self.given = arm
         #: The arm drawn and jogged now.
         self.arm = arm or DEFAULT_CHOICE
-        self.snapshot: dict[str, Any] = {"link": {"connected": False, "error": "connecting"}}
+        self.snapshot: dict[str, Any] = {
+            "t": "state",
+            "link": {"connected": False, "error": "connecting"},
+        }
         self.listeners: list[Callable[[dict[str, Any]], None]] = []
         #: Watch-list names requested by the pages (set by the server, bounded by MAX_WATCH).
         self.watch: set[str] = set()
@@ -148,7 +151,7 @@ class RobotLink:
                 await self.poll_once()
             except (KvpError, OSError) as exc:
                 self.connected = False
-                self.snapshot = {"link": {"connected": False, "error": str(exc)}}
+                self.snapshot = {"t": "state", "link": {"connected": False, "error": str(exc)}}
                 self._notify()
                 await asyncio.sleep(1.0)
                 next_at = time.monotonic()
