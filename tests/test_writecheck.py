@@ -28,7 +28,7 @@ from pyopenshowvar_apps.writecheck import (
 )
 
 from kukavarproxy_emu import Emulator, Fault
-from pyopenshowvar import Client, KrlEnum, WriteRefusedError, parse_value
+from pyopenshowvar import Client, KrlEnum, Struct, WriteRefusedError, parse_value
 
 #: an E6AXIS as the controller prints it, every member present
 AXIS = parse_value(
@@ -126,6 +126,13 @@ def test_a_literal_of_another_type_says_why(current: Any, literal: str, why: str
 )
 def test_a_literal_that_fits_has_no_mismatch(current: Any, literal: str) -> None:
     assert _type_mismatch(current, literal) is None
+
+
+def test_a_user_struct_the_library_does_not_know_is_compared_by_members() -> None:
+    mine = Struct("MYTYPE", {"A": 1, "B": 2})
+    assert _type_mismatch(mine, "{A 5}") is None
+    assert _type_mismatch(mine, "{C 5}") == "MYTYPE has no member C"
+    assert _type_mismatch(mine, "5") == "the value is not a struct"
 
 
 # ---------------------------------------------------------------------- program state
@@ -272,3 +279,20 @@ async def test_a_refused_write_is_raised_with_its_reason(emulator: Emulator) -> 
         assert info.value.__cause__ is None and info.value.__suppress_context__
         assert (progress.sent, progress.answer) == (True, "refused")
         assert emulator.store.read("$OV_PRO") == "100"
+
+
+async def test_a_refused_write_to_a_user_struct_names_the_member(emulator: Emulator) -> None:
+    """A STRUC of the controller's own data lists is no type the library knows: its refusal
+    is explained by its members, not as an unknown type."""
+    emulator.store.load_dat(
+        "DEFDAT $CONFIG\nSTRUC MYTYPE INT A, B\nDECL MYTYPE MYVAR={A 1, B 2}\nENDDAT\n"
+    )
+    async with Client("127.0.0.1", emulator.port, timeout=2.0) as client:
+        with pytest.raises(RefusedWrite) as info:
+            await checked_write(client, "MYVAR", "{C 5}", window=0)
+        assert info.value.reason == (
+            "wrong type: the variable is MYTYPE (now {MYTYPE: A 1, B 2}); MYTYPE has no member C"
+        )
+        with pytest.raises(RefusedWrite) as info:
+            await checked_write(client, "MYVAR", "5", window=0)
+        assert info.value.reason.endswith("; the value is not a struct")
