@@ -32,6 +32,7 @@ from pyopenshowvar_apps.gateway.security import (
     Verdict,
     _digest,
     check_hash_format,
+    ensure_certificate,
     hash_password,
     trust_check,
     verify_password,
@@ -441,3 +442,119 @@ def test_hash_format_bounds() -> None:
     assert check_hash_format(f"pbkdf2-sha256${iterations}${b64(8)}${digest}") is None
     assert verify_password(PW, good) and not verify_password(PW + "!", good)
     assert verify_password("", hash_password("", iterations=FAST))  # the primitive itself
+
+
+def test_failures_of_one_address_are_remembered_up_to_the_threshold(g: LoginGuard) -> None:
+    for _ in range(100):  # a flood from one address: bounded memory, still locked
+        g.failed("10.9.9.9")
+    assert len(g._failures["10.9.9.9"]) == g.max_failures
+    assert g.locked("10.9.9.9")
+
+
+# ---------------------------------------------------------------------- the server certificate
+
+
+def _san(cert_path: Path) -> x509.SubjectAlternativeName:
+    cert = x509.load_der_x509_certificate(cert_path.read_bytes())
+    return cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+
+
+def test_the_server_certificate_names_the_gateway_and_lasts_ten_years(tmp_path: Path) -> None:
+    import socket
+
+    pki = tmp_path / "cell" / "pki"  # made with its parents
+    cert_path, key_path, fingerprint = ensure_certificate(pki, "urn:cell:a", "10.1.2.3")
+    assert (cert_path, key_path) == (pki / "gateway-cert.der", pki / "gateway-key.pem")
+    cert = x509.load_der_x509_certificate(cert_path.read_bytes())
+    assert fingerprint == cert.fingerprint(hashes.SHA256()).hex(":")
+    subject = cert.subject
+    assert subject.get_attributes_for_oid(NameOID.COMMON_NAME)[0].value == (
+        "pyopenshowvar kvp gateway"
+    )
+    assert subject.get_attributes_for_oid(NameOID.ORGANIZATION_NAME)[0].value == "pyopenshowvar"
+    assert cert.not_valid_after_utc - cert.not_valid_before_utc == timedelta(days=3650)
+    san = _san(cert_path)
+    assert socket.gethostname() in san.get_values_for_type(x509.DNSName)
+    assert [str(ip) for ip in san.get_values_for_type(x509.IPAddress)] == ["10.1.2.3"]
+
+
+@pytest.mark.parametrize("host", ["0.0.0.0", "::"])
+def test_a_wildcard_bind_is_no_name_in_the_certificate(tmp_path: Path, host: str) -> None:
+    import socket
+
+    cert_path, _, _ = ensure_certificate(tmp_path, "urn:cell:a", host)
+    san = _san(cert_path)
+    assert san.get_values_for_type(x509.IPAddress) == []
+    assert san.get_values_for_type(x509.DNSName) == [socket.gethostname()]
+
+
+def test_a_certificate_without_alternative_names_is_replaced(tmp_path: Path) -> None:
+    cert_path, key_path, _ = ensure_certificate(tmp_path, "urn:cell:a", "127.0.0.1")
+    key = serialization.load_pem_private_key(key_path.read_bytes(), password=None)
+    subject = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "bare")])
+    now = datetime.now(UTC)
+    bare = (
+        x509.CertificateBuilder()
+        .subject_name(subject)
+        .issuer_name(subject)
+        .public_key(key.public_key())  # type: ignore[arg-type]
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(now)
+        .not_valid_after(now + timedelta(days=1))
+        .sign(key, hashes.SHA256())  # type: ignore[arg-type]
+    )
+    cert_path.write_bytes(bare.public_bytes(serialization.Encoding.DER))
+    _, _, fingerprint = ensure_certificate(tmp_path, "urn:cell:a", "127.0.0.1")
+    assert fingerprint != bare.fingerprint(hashes.SHA256()).hex(":")
+    assert _san(cert_path).get_values_for_type(x509.UniformResourceIdentifier) == ["urn:cell:a"]
+
+
+def test_a_key_that_is_not_rsa_is_refused(tmp_path: Path) -> None:
+    from cryptography.hazmat.primitives.asymmetric import ec
+
+    key = ec.generate_private_key(ec.SECP256R1())
+    (tmp_path / "gateway-key.pem").write_bytes(
+        key.private_bytes(
+            serialization.Encoding.PEM,
+            serialization.PrivateFormat.PKCS8,
+            serialization.NoEncryption(),
+        )
+    )
+    with pytest.raises(ValueError, match=r"gateway-key\.pem: not an RSA key"):
+        ensure_certificate(tmp_path, "urn:cell:a", "127.0.0.1")
+
+
+def test_an_empty_user_name_never_logs_in_even_if_declared() -> None:
+    made = guard(users={"": PW})
+    try:
+        assert made.check("", PW) is False
+        assert made.check(None, PW) is False
+    finally:
+        made.close()
+
+
+async def test_every_login_is_checked_on_the_guards_one_thread(g: LoginGuard) -> None:
+    """A flood of logins takes one core: the checks queue on the guard's own thread, never
+    on the event loop's default executor (which has a thread per core)."""
+    import threading
+
+    threads: set[str] = set()
+    check = g.check
+
+    def recording(username: str | None, password: str | None) -> bool:
+        threads.add(threading.current_thread().name)
+        return check(username, password)
+
+    g.check = recording  # type: ignore[method-assign]
+    results = await asyncio.gather(*(g.login(f"10.2.0.{i}", "scada", PW) for i in range(3)))
+    assert results == ["scada"] * 3
+    assert len(threads) == 1 and next(iter(threads)).startswith("gateway-login")
+
+
+async def test_a_finished_login_no_longer_counts_as_waiting(g: LoginGuard) -> None:
+    g.max_pending = 1
+    for _ in range(3):  # one after the other: each finds none waiting
+        assert await g.login("10.3.0.1", "scada", PW) == "scada"
+    g.max_pending = 2
+    results = await asyncio.gather(*(g.login(f"10.3.0.{i}", "scada", PW) for i in range(3)))
+    assert results == ["scada", "scada", None]  # still at most two at once
