@@ -558,3 +558,28 @@ async def test_a_finished_login_no_longer_counts_as_waiting(g: LoginGuard) -> No
     g.max_pending = 2
     results = await asyncio.gather(*(g.login(f"10.3.0.{i}", "scada", PW) for i in range(3)))
     assert results == ["scada", "scada", None]  # still at most two at once
+
+
+def test_a_one_character_password_is_a_password() -> None:
+    made = guard(users={"short": "x"})  # the cell file's hash decides, not a length rule
+    try:
+        assert made.check("short", "x") is True
+        assert made.check("short", "y") is False
+    finally:
+        made.close()
+
+
+async def test_closing_the_guard_drops_the_logins_still_waiting() -> None:
+    """The gateway is stopping: a login that waits for the password thread is cancelled, not
+    checked after the server is gone (the one being checked finishes)."""
+    made = guard(users={"slow": PW})
+    made._users["slow"] = hash_password(PW, iterations=200_000)  # long enough to close meanwhile
+    first = asyncio.create_task(made.login("10.4.0.1", "slow", PW))
+    second = asyncio.create_task(made.login("10.4.0.2", "slow", PW))
+    async with asyncio.timeout(5):
+        while made._pending < 2:  # noqa: ASYNC110 - both handed to the password thread
+            await asyncio.sleep(0)
+    made.close()
+    results = await asyncio.gather(first, second, return_exceptions=True)
+    assert results[0] == "slow"
+    assert isinstance(results[1], asyncio.CancelledError)
