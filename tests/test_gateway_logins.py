@@ -583,3 +583,22 @@ async def test_closing_the_guard_drops_the_logins_still_waiting() -> None:
     results = await asyncio.gather(first, second, return_exceptions=True)
     assert results[0] == "slow"
     assert isinstance(results[1], asyncio.CancelledError)
+
+
+def test_without_limits_the_guard_has_the_cell_files_defaults(clock: Clock) -> None:
+    from pyopenshowvar_apps.gateway.cell import SecurityConfig
+
+    defaults = SecurityConfig(enabled=True)
+    made = LoginGuard([], anonymous=False, clock=clock)
+    try:
+        for _ in range(defaults.max_failed_logins - 1):
+            made.failed("10.5.0.1")
+        assert not made.locked("10.5.0.1")
+        made.failed("10.5.0.1")
+        assert made.locked("10.5.0.1")
+        clock.now += defaults.lockout_seconds - 0.001
+        assert made.locked("10.5.0.1")
+        clock.now += 0.001
+        assert not made.locked("10.5.0.1")
+    finally:
+        made.close()
