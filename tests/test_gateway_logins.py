@@ -343,13 +343,15 @@ async def test_login_with_an_untrusted_certificate_is_refused_and_counted(
         seen.append(der)
         return der == b"good"
 
-    g.trusts = trusts
+    g.close()
+    g = guard(trusts=trusts, max_failures=3, window=10.0)  # as the gateway makes it
     assert await g.login("a", "scada", PW, b"good") == "scada"
     assert await g.login("a", "scada", PW, b"bad") is None
     assert await g.login("a", "scada", PW, None) is None
     assert seen == [b"good", b"bad", None]
     await g.login("a", "scada", PW, b"bad")
     assert g.locked("a")  # three certificate refusals are three failures
+    g.close()
 
 
 async def test_without_a_trusted_folder_any_certificate_passes(g: LoginGuard) -> None:
@@ -600,5 +602,14 @@ def test_without_limits_the_guard_has_the_cell_files_defaults(clock: Clock) -> N
         assert made.locked("10.5.0.1")
         clock.now += 0.001
         assert not made.locked("10.5.0.1")
+    finally:
+        made.close()
+
+
+def test_a_guard_without_users_refuses_every_login() -> None:
+    made = LoginGuard([], anonymous=False)
+    try:
+        assert made.cost == 200_000  # the cost of a login: that of a default hash
+        assert made.check("scada", PW) is False
     finally:
         made.close()
