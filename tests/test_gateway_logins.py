@@ -613,3 +613,20 @@ def test_a_guard_without_users_refuses_every_login() -> None:
         assert made.check("scada", PW) is False
     finally:
         made.close()
+
+
+def test_a_hash_has_a_16_byte_salt_and_a_bad_one_is_named_exactly() -> None:
+    import base64
+
+    _, _, salt, digest = hash_password(PW, iterations=FAST).split("$")
+    assert "=" not in salt + digest  # unpadded base64, as the format shows it
+    assert len(base64.b64decode(salt + "==")) == 16 and len(base64.b64decode(digest + "=")) == 32
+    # what the cell file's check says (kvp gateway prints it with the user's entry)
+    assert check_hash_format(f"pbkdf2-sha256$10000$!!!!${digest}") == (
+        "salt and hash must be base64"
+    )
+    assert check_hash_format(f"pbkdf2-sha256$10000${salt}${salt}") == (
+        "salt of at least 8 bytes and a 32-byte hash expected"
+    )
+    assert check_hash_format("pbkdf2-sha256$1$a$b") == "iterations must be within 10000..2000000"
+    assert check_hash_format("x") == "expected pbkdf2-sha256$ITERATIONS$SALT$HASH"
