@@ -576,15 +576,19 @@ async def test_closing_the_guard_drops_the_logins_still_waiting() -> None:
     checked after the server is gone (the one being checked finishes)."""
     made = guard(users={"slow": PW})
     made._users["slow"] = hash_password(PW, iterations=200_000)  # long enough to close meanwhile
+    t0 = time.perf_counter()
     first = asyncio.create_task(made.login("10.4.0.1", "slow", PW))
     second = asyncio.create_task(made.login("10.4.0.2", "slow", PW))
     async with asyncio.timeout(5):
         while made._pending < 2:  # noqa: ASYNC110 - both handed to the password thread
             await asyncio.sleep(0)
-    made.close()
+    t1 = time.perf_counter()
+    made.close()  # on the event loop: it must not wait for the check that runs
+    closing = time.perf_counter() - t1
     results = await asyncio.gather(first, second, return_exceptions=True)
     assert results[0] == "slow"
     assert isinstance(results[1], asyncio.CancelledError)
+    assert closing < (time.perf_counter() - t0) / 2
 
 
 def test_without_limits_the_guard_has_the_cell_files_defaults(clock: Clock) -> None:
@@ -630,3 +634,12 @@ def test_a_hash_has_a_16_byte_salt_and_a_bad_one_is_named_exactly() -> None:
     )
     assert check_hash_format("pbkdf2-sha256$1$a$b") == "iterations must be within 10000..2000000"
     assert check_hash_format("x") == "expected pbkdf2-sha256$ITERATIONS$SALT$HASH"
+
+
+def test_unpadded_base64_round_trips_whatever_its_last_character() -> None:
+    from pyopenshowvar_apps.gateway.security import _b64, _unb64
+
+    for data in (b"\x00\x00\x17", b"\x00\x00\x17\x00", b"\xff" * 16, b"", b"a"):
+        text = _b64(data)
+        assert "=" not in text and _unb64(text) == data, (data, text)
+    assert _b64(b"\x00\x00\x17") == "AAAX"
