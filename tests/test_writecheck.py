@@ -58,6 +58,8 @@ def test_a_message_without_a_position_is_kept_whole() -> None:
     assert _problem("invalid KRL value 'x': a: b at 7") == LiteralProblem("a: b", 7)
     # " at N" is only the position when it ends the message
     assert _problem("stuck at 3 here") == LiteralProblem("stuck at 3 here", None)
+    # the prefix without a reason after it: nothing to cut
+    assert _problem("invalid KRL value x") == LiteralProblem("invalid KRL value x", None)
 
 
 def test_the_caret_stands_under_the_character_of_a_one_line_literal() -> None:
