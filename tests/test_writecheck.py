@@ -211,8 +211,21 @@ def test_a_refused_write_carries_its_reason() -> None:
 
 async def test_refusal_reasons_from_the_controller(emulator: Emulator) -> None:
     async with Client("127.0.0.1", emulator.port, timeout=2.0) as client:
-        assert "reads as unknown" in await explain_refusal(client, "NOPE", "5")
-        assert (await explain_refusal(client, "$MODE_OP", "#T1")).startswith("read-only:")
+        assert await explain_refusal(client, "NOPE", "5") == (
+            "the variable reads as unknown: not declared, an index or member that does not"
+            " exist, or never initialised (and the value does not fit its type)"
+        )
+        assert await explain_refusal(client, "$MODE_OP", "#T1") == (
+            "read-only: a KRC lets no client write this system variable"
+        )
+        assert await explain_refusal(client, "$MODE_OP", "5") == (
+            "wrong type: the variable is an ENUM (now #AUT); the value is not an ENUM value #NAME"
+        )
+        # a text that is no KRL value (the proxy's own variables): no type to compare
+        assert await explain_refusal(client, "@PROXY_TYPE", "5") == (
+            "the controller gives no reason; the value fits its type (now KUKAVARPROXY"
+            " EMULATOR), so it is probably read-only or out of range"
+        )
         assert await explain_refusal(client, "$OV_PRO", "101") == "out of range 0..100"
         assert await explain_refusal(client, "$OV_PRO", "-1") == "out of range 0..100"
         assert await explain_refusal(client, "$ADVANCE", "6") == "out of range 0..5"
