@@ -8,6 +8,7 @@ program that a software limit switch stops.
 
 from __future__ import annotations
 
+import asyncio
 import time
 from typing import Any
 
@@ -29,6 +30,8 @@ from pyopenshowvar_apps.writecheck import (
 
 from kukavarproxy_emu import Emulator, Fault
 from pyopenshowvar import Client, KrlEnum, Struct, WriteRefusedError, parse_value
+from pyopenshowvar.protocol import Request
+from pyopenshowvar.testing import FakeProxy, answer
 
 #: an E6AXIS as the controller prints it, every member present
 AXIS = parse_value(
@@ -282,6 +285,7 @@ async def test_without_a_window_nothing_but_the_write_is_sent(emulator: Emulator
         outcome = await checked_write(client, "MYINT", "8", window=0)
         assert outcome.echo == "8" and outcome.stop is None
         assert emulator.stats.requests == before + 1
+        assert 0 < outcome.seconds < 2.0
 
 
 async def test_a_refused_write_is_raised_with_its_reason(emulator: Emulator) -> None:
@@ -289,7 +293,7 @@ async def test_a_refused_write_is_raised_with_its_reason(emulator: Emulator) -> 
         progress = WriteProgress()
         with pytest.raises(RefusedWrite) as info:
             await checked_write(client, "$OV_PRO", "150", window=0, progress=progress)
-        assert info.value.reason == "out of range 0..100"
+        assert info.value.reason == "out of range 0..100" and info.value.value == "150"
         assert info.value.endpoint == f"127.0.0.1:{emulator.port}"
         assert info.value.__cause__ is None and info.value.__suppress_context__
         assert (progress.sent, progress.answer) == (True, "refused")
@@ -311,3 +315,33 @@ async def test_a_refused_write_to_a_user_struct_names_the_member(emulator: Emula
         with pytest.raises(RefusedWrite) as info:
             await checked_write(client, "MYVAR", "5", window=0)
         assert info.value.reason.endswith("; the value is not a struct")
+
+
+async def test_a_controller_without_the_emulators_variables() -> None:
+    """A real KRC has no $EMU_MESSAGE[]; here $STOPMESS is unknown too (an old proxy): those
+    fields are None, never an empty text or FALSE."""
+    texts = {"$PRO_STATE1": b"#P_ACTIVE"}
+
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        w.write(answer(req, texts.get(req.name, b"")))  # empty with success: unknown
+
+    async with FakeProxy(handler) as port, Client("127.0.0.1", port, timeout=2.0) as client:
+        assert await read_program_state(client) == ProgramState("#P_ACTIVE", None, None)
+        texts.update({"$STOPMESS": b" true ", "$EMU_MESSAGE[]": b'" X limit X "'})
+        assert await read_program_state(client) == ProgramState("#P_ACTIVE", True, "X limit X")
+
+
+async def test_an_interrupted_write_on_an_open_connection_was_sent(emulator: Emulator) -> None:
+    async with Client("127.0.0.1", emulator.port, timeout=5.0) as client:
+        await client.read("MYINT")  # connected
+        emulator.faults.add(Fault("drop", count=None))  # the write is never answered
+        progress = WriteProgress()
+        task = asyncio.create_task(checked_write(client, "MYINT", "9", window=0, progress=progress))
+        async with asyncio.timeout(2):
+            while not progress.sent:  # noqa: ASYNC110 - set before the write first awaits
+                await asyncio.sleep(0.01)
+        task.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await task
+        assert progress.answer is None
+        assert progress.describe("MYINT").startswith("the write was sent but not answered")
