@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import socket
 from collections.abc import AsyncIterator, Awaitable, Callable
 from pathlib import Path
 
@@ -93,12 +94,21 @@ async def test_a_connection_without_an_address_is_counted_under_one_name(tmp_pat
     path = str(tmp_path / "s")
     server = await loop.create_unix_server(Accept, path)
     client, _ = await loop.create_unix_connection(asyncio.Protocol, path)
+    named = socket.socket(socket.AF_UNIX)
+    named.bind(str(tmp_path / "c"))  # a client with a path: its peer name is that text
+    named.connect(path)
+    other, _ = await loop.create_unix_connection(asyncio.Protocol, sock=named)
     try:
         transport = await asyncio.wait_for(accepted.get(), 2.0)
         guard = ConnectionGuard(per_address=1)
         assert guard.address(transport) == "?"
         assert guard.admit(transport) and guard.open == {"?": {transport}}
+        second = await asyncio.wait_for(accepted.get(), 2.0)
+        assert second.get_extra_info("peername") == str(tmp_path / "c")
+        assert guard.address(second) == "?"
+        assert not guard.admit(second)  # the same "address" as the first
     finally:
+        other.close()
         client.close()
         server.close()
         await server.wait_closed()
@@ -110,17 +120,28 @@ def test_the_log_limit_forgets_quiet_keys_beyond_a_thousand(
     now = [100.0]
     limit = LogLimit(logging.getLogger("test.loglimit.keys"), period=10.0, clock=lambda: now[0])
     with caplog.at_level(logging.WARNING, logger="test.loglimit.keys"):
-        for i in range(1001):
+        for i in range(1000):
             limit.warning(f"k{i}", "refused %s", i)
-        assert len(limit._last) == 1001
-        now[0] += 10.0  # exactly one period later: each key may log again
-        limit.warning("k0", "refused %s", 0)
-        assert len(caplog.records) == 1002
-        # every other key is quiet for a period: forgotten, the new key kept
-        assert set(limit._last) == {"k0"}
-        now[0] += 5.0
-        limit.warning("k0", "refused %s", 0)  # within the period: left out, and counted
-        assert limit._last["k0"] == (110.0, 1)
-        now[0] += 5.0
-        limit.warning("k0", "refused %s", 0)
-    assert caplog.records[-1].getMessage() == "refused 0 (and 1 more like it)"
+        now[0] += 10.0  # one period later: every key is quiet
+        limit.warning("n1", "refused %s", "n1")
+        assert len(limit._last) == 1001  # a thousand keys are kept
+        limit.warning("n2", "refused %s", "n2")  # beyond: the quiet ones are forgotten
+        assert set(limit._last) == {"n1", "n2"}
+    assert len(caplog.records) == 1002
+
+
+def test_the_log_limit_speaks_again_after_exactly_one_period(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    now = [0.0]
+    limit = LogLimit(logging.getLogger("test.loglimit.period"), period=10.0, clock=lambda: now[0])
+    with caplog.at_level(logging.WARNING, logger="test.loglimit.period"):
+        limit.warning("a", "refused %s", "a")
+        now[0] = 9.999
+        limit.warning("a", "refused %s", "a")  # left out, and counted
+        now[0] = 10.0
+        limit.warning("a", "refused %s", "a")
+    assert [r.getMessage() for r in caplog.records] == [
+        "refused a",
+        "refused a (and 1 more like it)",
+    ]
