@@ -327,7 +327,7 @@ async def test_a_controller_without_the_emulators_variables() -> None:
 
     async with FakeProxy(handler) as port, Client("127.0.0.1", port, timeout=2.0) as client:
         assert await read_program_state(client) == ProgramState("#P_ACTIVE", None, None)
-        texts.update({"$STOPMESS": b" true ", "$EMU_MESSAGE[]": b'" X limit X "'})
+        texts.update({"$STOPMESS": b" true ", "$EMU_MESSAGE[]": b'"X limit X "'})
         assert await read_program_state(client) == ProgramState("#P_ACTIVE", True, "X limit X")
 
 
