@@ -568,3 +568,26 @@ async def test_a_select_whose_client_left_still_completes_and_frees_the_next(
         assert reply == answer(2, 10, H("05"), 1)
     assert not c3.c3.control.selecting
     assert c3.store.read("$PRO_NAME1[]") == '"FOLLOW"'
+
+
+async def test_a_character_outside_ansi_is_written_as_a_question_mark(
+    c3: Emulator, raw: RawClient
+) -> None:
+    """KRC text is ANSI: #5 and #7 write what has no ANSI character as '?', as the server's
+    conversion does, instead of failing the write."""
+    c3.store.declare("RULE_T", "CHAR", (8,), '"a"')
+    assert await raw.request(frame(1, 5, W("RULE_T[]") + W('"€x"'))) == answer(1, 5, W('"€x"'), 1)
+    assert c3.store.read("RULE_T[]") == '"?x"'
+    reply = await raw.request(frame(2, 7, H("01") + W("RULE_T[]") + W('"y€"')))
+    assert reply.endswith(W('"y?"') + H("0001 01"))  # read back, and success
+    assert c3.store.read("RULE_T[]") == '"y?"'
+
+
+async def test_a_start_or_stop_key_acts_on_the_interpreter_it_names(raw: RawClient) -> None:
+    def kcp(kind: int, target: int) -> bytes:
+        return bytes((kind,)) + struct.pack(">iiBB", target, 0, 0, 0)
+
+    # the robot interpreter: no program runs, so there is nothing to stop
+    assert await raw.request(frame(1, 12, kcp(2, 1))) == answer(1, 12, H("02"), 0)
+    assert await raw.request(frame(2, 12, kcp(2, 0))) == answer(2, 12, H("02"), 1)  # submit
+    assert await raw.request(frame(3, 12, kcp(2, 7))) == answer(3, 12, H("02"), ErrorCode.ARGUMENT)
