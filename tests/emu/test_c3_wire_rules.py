@@ -412,6 +412,7 @@ def test_decode_kind_and_weight() -> None:
         "write", None, None, "read", None,
     ]  # fmt: skip
     assert [kind(21), kind(22), kind(26)] == ["read", "write", "read"]
+    assert kind(30) is None  # a file read cut before its operation loads nothing
     weight = session.weight
     assert weight(Request(1, 6, "", H("05"))) == 5 and weight(Request(1, 7, "", H("03"))) == 3
     assert weight(Request(1, 6, "", H("00"))) == 1 and weight(Request(1, 6, "", b"")) == 1
