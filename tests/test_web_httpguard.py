@@ -12,6 +12,7 @@ import logging
 import socket
 from collections.abc import AsyncIterator, Awaitable, Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 from pyopenshowvar_apps.web import httpguard
@@ -145,3 +146,69 @@ def test_the_log_limit_speaks_again_after_exactly_one_period(
         "refused a",
         "refused a (and 1 more like it)",
     ]
+
+
+async def _app(scope: dict[str, Any], receive: Any, send: Any) -> None:
+    """The smallest ASGI page: ``/slow`` answers after 0.5 s (longer than the head timeout)."""
+    if scope["type"] != "http":
+        return
+    if scope["path"] == "/slow":
+        await asyncio.sleep(0.5)
+    await send(
+        {"type": "http.response.start", "status": 200, "headers": [(b"content-length", b"2")]}
+    )
+    await send({"type": "http.response.body", "body": b"ok"})
+
+
+async def test_uvicorn_with_the_guard_times_out_heads_and_refuses_beyond_the_cap(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """uvicorn's own protocols with the guard, on a minimal page (about 1.5 s: two head
+    timeouts of 0.3 s and a 0.5 s response)."""
+    import uvicorn
+
+    guard = ConnectionGuard(per_address=2, total=10, head_timeout=0.3)
+    http, ws = httpguard.guarded_protocols(guard)
+    config = uvicorn.Config(
+        _app, host="127.0.0.1", port=0, http=http, ws=ws, lifespan="off", log_level="error"
+    )
+    server = uvicorn.Server(config)
+    serving = asyncio.create_task(server.serve())
+    try:
+        async with asyncio.timeout(5):
+            while not server.started:  # noqa: ASYNC110 - uvicorn has no event for it
+                await asyncio.sleep(0.01)
+        port = server.servers[0].sockets[0].getsockname()[1]
+        get = b"GET /%s HTTP/1.1\r\nHost: x\r\n\r\n"
+        # a response slower than the head timeout is not cut; the idle keep-alive then is
+        reader, writer = await asyncio.open_connection("127.0.0.1", port)
+        writer.write(get % b"slow")
+        answer = await asyncio.wait_for(reader.read(), 5)
+        writer.close()
+        assert answer.startswith(b"HTTP/1.1 200 ") and b"\r\n\r\nok" in answer
+        assert answer.endswith(b"HTTP/1.1 408 Request Timeout\r\nConnection: close\r\n"
+                               b"Content-Length: 0\r\n\r\n")  # fmt: skip
+        assert guard.timed_out == 1
+        # two held connections from one address, the third refused at once, unread
+        held = [await asyncio.open_connection("127.0.0.1", port) for _ in range(2)]
+        with caplog.at_level(logging.WARNING, logger=httpguard.__name__):
+            reader, writer = await asyncio.open_connection("127.0.0.1", port)
+            writer.write(get % b"")  # never parsed
+            refused = await asyncio.wait_for(reader.read(), 5)
+            writer.close()
+        assert refused == (
+            b"HTTP/1.1 503 Service Unavailable\r\nConnection: close\r\nContent-Length: 0\r\n\r\n"
+        )
+        assert guard.refused == 1 and guard.count == 2
+        assert "refused connections from 127.0.0.1: too many" in caplog.text
+        for r, w in held:  # neither sends a head: both are closed after the timeout
+            assert (await asyncio.wait_for(r.read(), 5)).startswith(b"HTTP/1.1 408 ")
+            w.close()
+        assert guard.timed_out == 3
+        async with asyncio.timeout(2):
+            while guard.count:  # noqa: ASYNC110 - connection_lost releases them
+                await asyncio.sleep(0.01)
+        assert guard.open == {}
+    finally:
+        server.should_exit = True
+        await serving
