@@ -592,3 +592,22 @@ async def test_a_start_or_stop_key_acts_on_the_interpreter_it_names(raw: RawClie
     assert await raw.request(frame(1, 12, kcp(2, 1))) == answer(1, 12, H("02"), 0)
     assert await raw.request(frame(2, 12, kcp(2, 0))) == answer(2, 12, H("02"), 1)  # submit
     assert await raw.request(frame(3, 12, kcp(2, 7))) == answer(3, 12, H("02"), ErrorCode.ARGUMENT)
+
+
+async def test_the_servers_own_variables(c3: Emulator, raw: RawClient) -> None:
+    """Spec §3.5.1: the internal variables a C3 client may read (by their exact names)."""
+    import datetime as dt
+
+    async def read(tag: int, name: str) -> tuple[str, int]:
+        reply = decode_reply(await raw.request(frame(tag, 4, W(name))))
+        return reply.value[2:].decode("utf-16-le"), int.from_bytes(reply.code, "big")
+
+    assert await read(1, "@PROXY_HOSTNAME") == ("KRC4-EMULATOR", ErrorCode.SUCCESS)
+    assert await read(2, "@PROXY_ADDRESS") == ("127.0.0.1", ErrorCode.SUCCESS)
+    assert await read(3, "@PROXY_PORT") == (str(c3.port), ErrorCode.SUCCESS)
+    assert await read(4, "@PROXY_ENABLED") == ("TRUE", ErrorCode.SUCCESS)
+    assert await read(5, "@proxy_enabled") == ("", ErrorCode.GENERAL)  # names are exact
+    text, code = await read(6, "@PROXY_TIME")
+    stamp = dt.datetime.strptime(text, "%Y-%m-%dT%H:%M:%SZ").replace(tzinfo=dt.UTC)
+    assert code == ErrorCode.SUCCESS
+    assert abs((dt.datetime.now(dt.UTC) - stamp).total_seconds()) < 60  # UTC, not local time
