@@ -160,7 +160,7 @@ def test_variable_names_a_page_may_not_use(name: str) -> None:
 
 @pytest.mark.parametrize("value", [None, 3, ["$OV_PRO"], {"n": 1}])
 def test_a_variable_name_is_a_string(value: Any) -> None:
-    with pytest.raises(ValueError, match="^a variable name is a string$"):
+    with pytest.raises(ValueError, match=r"^a variable name is a string$"):
         variable_name(value)
 
 
