@@ -155,6 +155,8 @@ def write_mutmut_config(
         "pytest_add_cli_args_test_selection": tests,
         "pytest_add_cli_args": list(settings.get("pytest_args", [])),
         "do_not_mutate_patterns": list(settings.get("do_not_mutate_patterns", [])),
+        # mutmut runs the tests in its own copy (mutants/): the files tests read go there too
+        "also_copy": list(settings.get("also_copy", [])),
         "timeout_constant": float(settings.get("timeout_constant", 5.0)),
         "timeout_multiplier": float(settings.get("timeout_multiplier", 4.0)),
         "use_setproctitle": False,

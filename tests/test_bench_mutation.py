@@ -40,7 +40,13 @@ def countdown(n: int) -> int:
 '''
 
 TESTS = """\
+from pathlib import Path
+
 from tinypkg.tiny import countdown, is_positive
+
+
+def test_a_file_the_tests_read_is_there() -> None:
+    assert (Path(__file__).parents[1] / "docs" / "note.txt").read_text() == "read by a test"
 
 
 def test_sign() -> None:
@@ -55,7 +61,7 @@ def test_countdown() -> None:
 CONFIG = """\
 [settings]
 packages = { tinypkg = "src/tinypkg" }
-also_copy = ["tests", "pyproject.toml"]
+also_copy = ["tests", "docs", "pyproject.toml"]
 timeout_constant = 1.0
 timeout_multiplier = 2.0
 pytest_args = ["-p", "no:cacheprovider"]
@@ -93,6 +99,8 @@ def tiny(tmp_path: Path) -> Path:
     root = tmp_path / "proj"
     (root / "src" / "tinypkg").mkdir(parents=True)
     (root / "tests").mkdir()
+    (root / "docs").mkdir()
+    (root / "docs" / "note.txt").write_text("read by a test")
     (root / "src" / "tinypkg" / "__init__.py").write_text("")
     (root / "src" / "tinypkg" / "tiny.py").write_text(MODULE)
     (root / "tests" / "test_tiny.py").write_text(TESTS)

@@ -32,6 +32,7 @@ from pyopenshowvar_apps.gateway.security import (
     Verdict,
     _digest,
     check_hash_format,
+    ensure_certificate,
     hash_password,
     trust_check,
     verify_password,
@@ -351,13 +352,15 @@ async def test_login_with_an_untrusted_certificate_is_refused_and_counted(
         seen.append(der)
         return der == b"good"
 
-    g.trusts = trusts
+    g.close()
+    g = guard(trusts=trusts, max_failures=3, window=10.0)  # as the gateway makes it
     assert await g.login("a", "scada", PW, b"good") == "scada"
     assert await g.login("a", "scada", PW, b"bad") is None
     assert await g.login("a", "scada", PW, None) is None
     assert seen == [b"good", b"bad", None]
     await g.login("a", "scada", PW, b"bad")
     assert g.locked("a")  # three certificate refusals are three failures
+    g.close()
 
 
 async def test_without_a_trusted_folder_any_certificate_passes(g: LoginGuard) -> None:
@@ -450,3 +453,202 @@ def test_hash_format_bounds() -> None:
     assert check_hash_format(f"pbkdf2-sha256${iterations}${b64(8)}${digest}") is None
     assert verify_password(PW, good) and not verify_password(PW + "!", good)
     assert verify_password("", hash_password("", iterations=FAST))  # the primitive itself
+
+
+def test_failures_of_one_address_are_remembered_up_to_the_threshold(g: LoginGuard) -> None:
+    for _ in range(100):  # a flood from one address: bounded memory, still locked
+        g.failed("10.9.9.9")
+    assert len(g._failures["10.9.9.9"]) == g.max_failures
+    assert g.locked("10.9.9.9")
+
+
+# ---------------------------------------------------------------------- the server certificate
+
+
+def _san(cert_path: Path) -> x509.SubjectAlternativeName:
+    cert = x509.load_der_x509_certificate(cert_path.read_bytes())
+    return cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+
+
+def test_the_server_certificate_names_the_gateway_and_lasts_ten_years(tmp_path: Path) -> None:
+    import socket
+
+    pki = tmp_path / "cell" / "pki"  # made with its parents
+    cert_path, key_path, fingerprint = ensure_certificate(pki, "urn:cell:a", "10.1.2.3")
+    assert (cert_path, key_path) == (pki / "gateway-cert.der", pki / "gateway-key.pem")
+    cert = x509.load_der_x509_certificate(cert_path.read_bytes())
+    assert fingerprint == cert.fingerprint(hashes.SHA256()).hex(":")
+    subject = cert.subject
+    assert subject.get_attributes_for_oid(NameOID.COMMON_NAME)[0].value == (
+        "pyopenshowvar kvp gateway"
+    )
+    assert subject.get_attributes_for_oid(NameOID.ORGANIZATION_NAME)[0].value == "pyopenshowvar"
+    assert cert.not_valid_after_utc - cert.not_valid_before_utc == timedelta(days=3650)
+    san = _san(cert_path)
+    assert socket.gethostname() in san.get_values_for_type(x509.DNSName)
+    assert [str(ip) for ip in san.get_values_for_type(x509.IPAddress)] == ["10.1.2.3"]
+
+
+@pytest.mark.parametrize("host", ["0.0.0.0", "::"])
+def test_a_wildcard_bind_is_no_name_in_the_certificate(tmp_path: Path, host: str) -> None:
+    import socket
+
+    cert_path, _, _ = ensure_certificate(tmp_path, "urn:cell:a", host)
+    san = _san(cert_path)
+    assert san.get_values_for_type(x509.IPAddress) == []
+    assert san.get_values_for_type(x509.DNSName) == [socket.gethostname()]
+
+
+def test_a_certificate_without_alternative_names_is_replaced(tmp_path: Path) -> None:
+    cert_path, key_path, _ = ensure_certificate(tmp_path, "urn:cell:a", "127.0.0.1")
+    key = serialization.load_pem_private_key(key_path.read_bytes(), password=None)
+    subject = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "bare")])
+    now = datetime.now(UTC)
+    bare = (
+        x509.CertificateBuilder()
+        .subject_name(subject)
+        .issuer_name(subject)
+        .public_key(key.public_key())  # type: ignore[arg-type]
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(now)
+        .not_valid_after(now + timedelta(days=1))
+        .sign(key, hashes.SHA256())  # type: ignore[arg-type]
+    )
+    cert_path.write_bytes(bare.public_bytes(serialization.Encoding.DER))
+    _, _, fingerprint = ensure_certificate(tmp_path, "urn:cell:a", "127.0.0.1")
+    assert fingerprint != bare.fingerprint(hashes.SHA256()).hex(":")
+    assert _san(cert_path).get_values_for_type(x509.UniformResourceIdentifier) == ["urn:cell:a"]
+
+
+def test_a_key_that_is_not_rsa_is_refused(tmp_path: Path) -> None:
+    from cryptography.hazmat.primitives.asymmetric import ec
+
+    key = ec.generate_private_key(ec.SECP256R1())
+    (tmp_path / "gateway-key.pem").write_bytes(
+        key.private_bytes(
+            serialization.Encoding.PEM,
+            serialization.PrivateFormat.PKCS8,
+            serialization.NoEncryption(),
+        )
+    )
+    with pytest.raises(ValueError, match=r"gateway-key\.pem: not an RSA key"):
+        ensure_certificate(tmp_path, "urn:cell:a", "127.0.0.1")
+
+
+def test_an_empty_user_name_never_logs_in_even_if_declared() -> None:
+    made = guard(users={"": PW})
+    try:
+        assert made.check("", PW) is False
+        assert made.check(None, PW) is False
+    finally:
+        made.close()
+
+
+async def test_every_login_is_checked_on_the_guards_one_thread(g: LoginGuard) -> None:
+    """A flood of logins takes one core: the checks queue on the guard's own thread, never
+    on the event loop's default executor (which has a thread per core)."""
+    import threading
+
+    threads: set[str] = set()
+    check = g.check
+
+    def recording(username: str | None, password: str | None) -> bool:
+        threads.add(threading.current_thread().name)
+        return check(username, password)
+
+    g.check = recording  # type: ignore[method-assign]
+    results = await asyncio.gather(*(g.login(f"10.2.0.{i}", "scada", PW) for i in range(3)))
+    assert results == ["scada"] * 3
+    assert len(threads) == 1 and next(iter(threads)).startswith("gateway-login")
+
+
+async def test_a_finished_login_no_longer_counts_as_waiting(g: LoginGuard) -> None:
+    g.max_pending = 1
+    for _ in range(3):  # one after the other: each finds none waiting
+        assert await g.login("10.3.0.1", "scada", PW) == "scada"
+    g.max_pending = 2
+    results = await asyncio.gather(*(g.login(f"10.3.0.{i}", "scada", PW) for i in range(3)))
+    assert results == ["scada", "scada", None]  # still at most two at once
+
+
+def test_a_one_character_password_is_a_password() -> None:
+    made = guard(users={"short": "x"})  # the cell file's hash decides, not a length rule
+    try:
+        assert made.check("short", "x") is True
+        assert made.check("short", "y") is False
+    finally:
+        made.close()
+
+
+async def test_closing_the_guard_drops_the_logins_still_waiting() -> None:
+    """The gateway is stopping: a login that waits for the password thread is cancelled, not
+    checked after the server is gone (the one being checked finishes)."""
+    made = guard(users={"slow": PW})
+    made._users["slow"] = hash_password(PW, iterations=200_000)  # long enough to close meanwhile
+    t0 = time.perf_counter()
+    first = asyncio.create_task(made.login("10.4.0.1", "slow", PW))
+    second = asyncio.create_task(made.login("10.4.0.2", "slow", PW))
+    async with asyncio.timeout(5):
+        while made._pending < 2:  # noqa: ASYNC110 - both handed to the password thread
+            await asyncio.sleep(0)
+    t1 = time.perf_counter()
+    made.close()  # on the event loop: it must not wait for the check that runs
+    closing = time.perf_counter() - t1
+    results = await asyncio.gather(first, second, return_exceptions=True)
+    assert results[0] == "slow"
+    assert isinstance(results[1], asyncio.CancelledError)
+    assert closing < (time.perf_counter() - t0) / 2
+
+
+def test_without_limits_the_guard_has_the_cell_files_defaults(clock: Clock) -> None:
+    from pyopenshowvar_apps.gateway.cell import SecurityConfig
+
+    defaults = SecurityConfig(enabled=True)
+    made = LoginGuard([], anonymous=False, clock=clock)
+    try:
+        for _ in range(defaults.max_failed_logins - 1):
+            made.failed("10.5.0.1")
+        assert not made.locked("10.5.0.1")
+        made.failed("10.5.0.1")
+        assert made.locked("10.5.0.1")
+        clock.now += defaults.lockout_seconds - 0.001
+        assert made.locked("10.5.0.1")
+        clock.now += 0.001
+        assert not made.locked("10.5.0.1")
+    finally:
+        made.close()
+
+
+def test_a_guard_without_users_refuses_every_login() -> None:
+    made = LoginGuard([], anonymous=False)
+    try:
+        assert made.cost == 200_000  # the cost of a login: that of a default hash
+        assert made.check("scada", PW) is False
+    finally:
+        made.close()
+
+
+def test_a_hash_has_a_16_byte_salt_and_a_bad_one_is_named_exactly() -> None:
+    import base64
+
+    _, _, salt, digest = hash_password(PW, iterations=FAST).split("$")
+    assert "=" not in salt + digest  # unpadded base64, as the format shows it
+    assert len(base64.b64decode(salt + "==")) == 16 and len(base64.b64decode(digest + "=")) == 32
+    # what the cell file's check says (kvp gateway prints it with the user's entry)
+    assert check_hash_format(f"pbkdf2-sha256$10000$!!!!${digest}") == (
+        "salt and hash must be base64"
+    )
+    assert check_hash_format(f"pbkdf2-sha256$10000${salt}${salt}") == (
+        "salt of at least 8 bytes and a 32-byte hash expected"
+    )
+    assert check_hash_format("pbkdf2-sha256$1$a$b") == "iterations must be within 10000..2000000"
+    assert check_hash_format("x") == "expected pbkdf2-sha256$ITERATIONS$SALT$HASH"
+
+
+def test_unpadded_base64_round_trips_whatever_its_last_character() -> None:
+    from pyopenshowvar_apps.gateway.security import _b64, _unb64
+
+    for data in (b"\x00\x00\x17", b"\x00\x00\x17\x00", b"\xff" * 16, b"", b"a"):
+        text = _b64(data)
+        assert "=" not in text and _unb64(text) == data, (data, text)
+    assert _b64(b"\x00\x00\x17") == "AAAX"

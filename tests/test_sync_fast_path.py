@@ -208,3 +208,24 @@ def test_a_reply_with_the_previous_id_after_a_timeout_is_not_the_next_value() ->
         # SLOW's late reply arrives first; the fast path must not take it as FAST's value
         assert kvp.read("FAST", timeout=1.0) == "v:FAST"
         assert kvp.write("W", "1", timeout=1.0) == "1"
+
+
+def test_a_pipelined_read_without_a_reply_times_out_alone_and_its_late_reply_is_dropped() -> None:
+    """read_many: each unanswered name gets its own timeout error naming it, the others their
+    values; the reply that comes later is discarded, and the connection stays in step."""
+
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        if req.name == "LATE":
+            await asyncio.sleep(0.4)
+        w.write(answer(req))
+
+    with FakeProxy(handler) as port, sync.Client(port=port, timeout=2.0) as kvp:
+        kvp.read("FIRST")  # connected
+        res = kvp.read_many(["A", "B", "LATE"], timeout=0.2)  # the proxy answers in order
+        assert res["A"].text == "v:A" and res["B"].text == "v:B"
+        error = res["LATE"].error
+        assert isinstance(error, KvpTimeoutError)
+        assert str(error) == f"no reply for 'LATE' from 127.0.0.1:{port} within 0.2 s"
+        assert kvp.read("NEXT", timeout=2.0) == "v:NEXT"  # not LATE's reply
+        assert kvp.connected
+        assert kvp.connection is not None and kvp.connection.in_flight == 0

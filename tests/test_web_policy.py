@@ -160,7 +160,7 @@ def test_variable_names_a_page_may_not_use(name: str) -> None:
 
 @pytest.mark.parametrize("value", [None, 3, ["$OV_PRO"], {"n": 1}])
 def test_a_variable_name_is_a_string(value: Any) -> None:
-    with pytest.raises(ValueError, match="a variable name is a string"):
+    with pytest.raises(ValueError, match=r"^a variable name is a string$"):
         variable_name(value)
 
 
@@ -254,7 +254,7 @@ def test_the_jog_override_is_clamped(ov: float, clamped: float) -> None:
     ],
 )
 def test_malformed_jog_presses_are_refused(kw: dict[str, Any], error: str) -> None:
-    with pytest.raises(ValueError, match=re.escape(error)):
+    with pytest.raises(ValueError, match="^" + re.escape(error)):  # what the page shows
         jog_request(_jog(**kw))
 
 
@@ -307,3 +307,37 @@ def test_log_limit_keeps_attackers_out_of_the_log(caplog: pytest.LogCaptureFixtu
         "refused b",
         "refused a (and 49 more like it)",
     ]
+
+
+def test_a_missing_token_never_matches_whatever_the_token() -> None:
+    for token in ("XXXX", "x", "None"):
+        assert refuse_connection(None, "pad:8080", None, token) == "token missing or wrong"
+        assert refuse_connection(None, "pad:8080", token, token) is None
+
+
+@pytest.mark.parametrize(
+    ("text", "depth"),
+    [
+        ("XX[1]XX", 1),  # only brackets count, not other characters
+        ("[X[", 2),
+        ("[[]][[[]]]", 3),  # every closing bracket undoes exactly one level
+        ("{}{{}}{{{}}}", 3),
+    ],
+)
+def test_json_depth_counts_brackets_only(text: str, depth: int) -> None:
+    assert json_depth(text) == depth
+
+
+def test_the_depth_limit_is_inclusive_however_many_brackets() -> None:
+    msg = '{"a": [[[1]]], "b": [2], "c": {}}'  # depth 4 (the limit), 7 brackets
+    assert parse_message(msg) == {"a": [[[1]]], "b": [2], "c": {}}
+
+
+def test_violation_reasons_are_cut_to_their_length() -> None:
+    with pytest.raises(Violation) as info:
+        parse_message('{"ov": 1' + "0" * 400 + ".5}")
+    assert info.value.reason == "number out of range: 1" + "0" * 19
+    with pytest.raises(Violation) as info:
+        parse_message('{"a": ' + "1" * 5000 + "}")  # beyond Python's integer digit limit
+    assert info.value.reason.startswith("not JSON: Exceeds the limit")
+    assert len(info.value.reason) == len("not JSON: ") + 80

@@ -35,6 +35,7 @@ from pyopenshowvar import (
     parse_value,
 )
 from pyopenshowvar.errors import KrlValueError
+from pyopenshowvar.krl import BUILTIN_TYPES
 from pyopenshowvar_apps.common import STOP_WINDOW, STOP_WINDOW_HELP
 
 __all__ = [
@@ -131,13 +132,11 @@ def _type_mismatch(current: Any, literal: str) -> str | None:
         value = parse_value(literal)
     except KrlValueError:
         return None  # checked before sending; nothing to add here
-    if type_name is not None:
+    if type_name is not None and _known_type(type_name):
         try:
             parse_value(literal, type_name)
         except KrlValueError as exc:
             return f"{_problem(str(exc)).reason}"
-        except (KeyError, ValueError):  # a user STRUC the library does not know
-            pass
     if isinstance(current, Struct) and isinstance(value, Struct):
         unknown = [m for m in value.members if m not in current.members]
         if unknown:
@@ -152,6 +151,16 @@ def _type_mismatch(current: Any, literal: str) -> str | None:
     if isinstance(current, str) and not isinstance(value, str):
         return 'the value is not a text "..."'
     return None
+
+
+def _known_type(type_name: str) -> bool:
+    """Whether the library knows ``type_name``; a user STRUC of the controller's data lists
+    it does not, and is compared by its members instead (an unknown type is no reason)."""
+    try:
+        BUILTIN_TYPES.resolve(type_name)
+    except KrlValueError:
+        return False
+    return True
 
 
 def _system_variable(name: str) -> Any:

@@ -15,7 +15,7 @@ import pytest
 from kukavarproxy_emu import Emulator
 from kukavarproxy_emu.abuse_modes import big_module
 from kukavarproxy_emu.c3 import HANDLED, VERSION
-from kukavarproxy_emu.testing import EmulatorFactory, RawClient
+from kukavarproxy_emu.testing import EmulatorFactory, RawClient, wait_until
 from pyopenshowvar.c3.constants import ErrorCode
 from pyopenshowvar.c3.files import FileWriteBegin, FileWriteData
 from pyopenshowvar.c3.messages import ProgramControl, ProgramSelect
@@ -412,6 +412,7 @@ def test_decode_kind_and_weight() -> None:
         "write", None, None, "read", None,
     ]  # fmt: skip
     assert [kind(21), kind(22), kind(26)] == ["read", "write", "read"]
+    assert kind(30) is None  # a file read cut before its operation loads nothing
     weight = session.weight
     assert weight(Request(1, 6, "", H("05"))) == 5 and weight(Request(1, 7, "", H("03"))) == 3
     assert weight(Request(1, 6, "", H("00"))) == 1 and weight(Request(1, 6, "", b"")) == 1
@@ -560,8 +561,53 @@ async def test_a_select_whose_client_left_still_completes_and_frees_the_next(
         gone = await RawClient.connect(c3.host, c3.port)
         await gone.send(ProgramSelect("/R1/GONE").frame(1))
         gone.writer.transport.abort()  # a reset right behind the select
+    # every select the server read from them is running or queued before the next one comes
+    # (a message read after the next one would be selected after it, as on C3 Bridge)
+    await wait_until(lambda: c3.stats.clients == 0, what="the server saw the clients leave")
     async with await RawClient.connect(c3.host, c3.port) as raw:
         reply = await raw.request(ProgramSelect("/R1/FOLLOW").frame(2), timeout=20)
         assert reply == answer(2, 10, H("05"), 1)
     assert not c3.c3.control.selecting
     assert c3.store.read("$PRO_NAME1[]") == '"FOLLOW"'
+
+
+async def test_a_character_outside_ansi_is_written_as_a_question_mark(
+    c3: Emulator, raw: RawClient
+) -> None:
+    """KRC text is ANSI: #5 and #7 write what has no ANSI character as '?', as the server's
+    conversion does, instead of failing the write."""
+    c3.store.declare("RULE_T", "CHAR", (8,), '"a"')
+    assert await raw.request(frame(1, 5, W("RULE_T[]") + W('"€x"'))) == answer(1, 5, W('"€x"'), 1)
+    assert c3.store.read("RULE_T[]") == '"?x"'
+    reply = await raw.request(frame(2, 7, H("01") + W("RULE_T[]") + W('"y€"')))
+    assert reply.endswith(W('"y?"') + H("0001 01"))  # read back, and success
+    assert c3.store.read("RULE_T[]") == '"y?"'
+
+
+async def test_a_start_or_stop_key_acts_on_the_interpreter_it_names(raw: RawClient) -> None:
+    def kcp(kind: int, target: int) -> bytes:
+        return bytes((kind,)) + struct.pack(">iiBB", target, 0, 0, 0)
+
+    # the robot interpreter: no program runs, so there is nothing to stop
+    assert await raw.request(frame(1, 12, kcp(2, 1))) == answer(1, 12, H("02"), 0)
+    assert await raw.request(frame(2, 12, kcp(2, 0))) == answer(2, 12, H("02"), 1)  # submit
+    assert await raw.request(frame(3, 12, kcp(2, 7))) == answer(3, 12, H("02"), ErrorCode.ARGUMENT)
+
+
+async def test_the_servers_own_variables(c3: Emulator, raw: RawClient) -> None:
+    """Spec §3.5.1: the internal variables a C3 client may read (by their exact names)."""
+    import datetime as dt
+
+    async def read(tag: int, name: str) -> tuple[str, int]:
+        reply = decode_reply(await raw.request(frame(tag, 4, W(name))))
+        return reply.value[2:].decode("utf-16-le"), int.from_bytes(reply.code, "big")
+
+    assert await read(1, "@PROXY_HOSTNAME") == ("KRC4-EMULATOR", ErrorCode.SUCCESS)
+    assert await read(2, "@PROXY_ADDRESS") == ("127.0.0.1", ErrorCode.SUCCESS)
+    assert await read(3, "@PROXY_PORT") == (str(c3.port), ErrorCode.SUCCESS)
+    assert await read(4, "@PROXY_ENABLED") == ("TRUE", ErrorCode.SUCCESS)
+    assert await read(5, "@proxy_enabled") == ("", ErrorCode.GENERAL)  # names are exact
+    text, code = await read(6, "@PROXY_TIME")
+    stamp = dt.datetime.strptime(text, "%Y-%m-%dT%H:%M:%SZ").replace(tzinfo=dt.UTC)
+    assert code == ErrorCode.SUCCESS
+    assert abs((dt.datetime.now(dt.UTC) - stamp).total_seconds()) < 60  # UTC, not local time

@@ -24,6 +24,7 @@ import asyncio
 import logging
 import math
 import time
+from collections.abc import Callable
 from typing import Any
 
 from uvicorn.protocols.http.h11_impl import H11Protocol
@@ -56,12 +57,17 @@ class LogLimit:
     """At most one log line per key every ``period`` seconds; the next one says how many were
     left out. An attacker must not be able to fill the log (or spend the server's time on it)."""
 
-    def __init__(self, logger: logging.Logger, period: float = 10.0) -> None:
-        self.logger, self.period = logger, period
+    def __init__(
+        self,
+        logger: logging.Logger,
+        period: float = 10.0,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.logger, self.period, self.clock = logger, period, clock
         self._last: dict[str, tuple[float, int]] = {}
 
     def warning(self, key: str, message: str, *args: object) -> None:
-        now = time.monotonic()
+        now = self.clock()
         last, skipped = self._last.get(key, (-math.inf, 0))
         if now - last < self.period:
             self._last[key] = (last, skipped + 1)
