@@ -296,7 +296,9 @@ async def jog_ready(kvp: Client, web: WebProcess) -> None:
     ws = await ws_page(web)
     while True:
         state = json.loads(await ws.recv())
-        if state.get("t") == "state" and state["program"]["jog_ready"] is None:
+        # a state while the link is still connecting has no program part yet
+        connected = state.get("t") == "state" and state["link"]["connected"]
+        if connected and state["program"]["jog_ready"] is None:
             break
     await ws.close()
 

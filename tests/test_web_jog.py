@@ -330,7 +330,7 @@ async def test_live_state_watch_list_and_writes(rig: tuple[Emulator, WebServer])
     async with asyncio.timeout(5):
         while "NOPE_VAR" not in seen or seen.get("MYINT", {}).get("text") != "55":
             msg = json.loads(await ws.recv())
-            if msg["t"] == "state":
+            if msg["t"] == "state" and msg["link"]["connected"]:
                 assert len(msg["axes"]) == 6 and len(msg["arm"]) == 8
                 assert msg["program"]["name"] == "KVP_JOG" and msg["program"]["jog_ready"] is None
                 seen.update(msg["watch"])
