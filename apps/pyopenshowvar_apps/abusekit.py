@@ -27,6 +27,7 @@ from types import TracebackType
 from typing import Any, Self
 
 from kukavarproxy_emu.abuse import AbuseTally, EmulatorProcess
+from kukavarproxy_emu.abuse_modes import PeakRss
 
 __all__ = ["AppProcess", "AttackTally", "ChildProbe", "PeakMemory", "run_child_probe"]
 
@@ -49,14 +50,6 @@ class AttackTally(AbuseTally):
             self.notes.append(what)
 
 
-def _status_mb(pid: int, key: str) -> float:
-    """A ``/proc/PID/status`` size in MB (``VmRSS``, ``VmHWM``)."""
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith(key + ":"):
-            return int(line.split()[1]) * 1024 / 1e6
-    raise RuntimeError(f"no {key} for {pid}")
-
-
 class PeakMemory:
     """``with PeakMemory(pid) as mem: ...``; then ``mem.peak``: the highest resident memory
     (MB) of process ``pid`` while the block ran, and ``mem.start``, what it had at the start.
@@ -65,11 +58,11 @@ class PeakMemory:
 
     def __init__(self, pid: int) -> None:
         self.pid = pid
+        self._rss = PeakRss(pid)  # the emulator suite's reader of the same two figures
         self.start = self.peak = 0.0
 
     def __enter__(self) -> Self:
-        Path(f"/proc/{self.pid}/clear_refs").write_text("5")  # a new high-water mark
-        self.start = _status_mb(self.pid, "VmRSS")
+        self.start = self._rss.reset()  # a new high-water mark, from the RSS now
         return self
 
     def __exit__(
@@ -78,7 +71,7 @@ class PeakMemory:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        self.peak = _status_mb(self.pid, "VmHWM")
+        self.peak = self._rss.peak_mb()
 
 
 class AppProcess(EmulatorProcess):

@@ -19,7 +19,6 @@ weaker.
 
 from __future__ import annotations
 
-import asyncio
 import socket
 import sys
 from collections.abc import Callable, Coroutine, Iterator
@@ -27,7 +26,6 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from pyopenshowvar_apps.abusekit import PeakMemory
 
 from kukavarproxy_emu.abuse import (
     RUNAWAY_KRL,
@@ -39,9 +37,8 @@ from kukavarproxy_emu.abuse import (
     long_names,
     mode3_flood,
     non_reader,
-    start_probe,
 )
-from kukavarproxy_emu.testing import wait_until
+from kukavarproxy_emu.abuse_modes import run_abuse
 from pyopenshowvar.protocol import ReplyDecoder, encode_read
 
 pytestmark = [
@@ -76,39 +73,11 @@ class Session:
         done: Callable[[AbuseTally], bool] = lambda tally: True,
     ) -> tuple[ProbeResult, AbuseTally, float]:
         """Run the bystander and ``abusers`` together for ``seconds`` and until ``done(tally)``
-        (at most ``PATIENCE`` seconds); (probe result, tally, RSS growth)."""
-        emu = self.emu
-        tally = AbuseTally()
-        probe = start_probe(
-            emu.host,
-            emu.port,
-            PATIENCE + 30.0,  # a cap only: it is stopped below
-            "ABUSE_PROBE",
-            emulator_pid=emu.pid,
-            until_stopped=True,
-            min_requests=MIN_REQUESTS,
+        (at most ``PATIENCE`` seconds more); (probe result, tally, peak RSS growth during the
+        abuse: the kernel's high-water mark, not what is left after it)."""
+        return run_abuse(
+            self.emu, abusers, seconds, done=done, patience=PATIENCE, min_requests=MIN_REQUESTS
         )
-
-        async def attack() -> ProbeResult:
-            tasks = [asyncio.create_task(a(emu.host, emu.port, tally)) for a in abusers]
-            await asyncio.sleep(seconds)  # the abuse lasts this long at least: what is tested
-            try:
-                await wait_until(lambda: done(tally), PATIENCE, interval=0.05)
-            except AssertionError:
-                pass  # the caller's checks of the tally say what fell short
-            # the bystander ends once it has its sample, the abusers still at it
-            result = await asyncio.to_thread(probe.result)
-            for task in tasks:
-                task.cancel()
-            for outcome in await asyncio.gather(*tasks, return_exceptions=True):
-                if isinstance(outcome, Exception):
-                    tally.errors += 1
-            return result
-
-        # the peak during the abuse (the kernel's high-water mark), not what is left after it
-        with PeakMemory(emu.pid) as memory:
-            result = asyncio.run(attack())
-        return result, tally, memory.peak - memory.start
 
     def check(self, result: ProbeResult, tally: AbuseTally, growth: float) -> None:
         # the figures, for `pytest tests/abuse -s` (the closing notes quote them)

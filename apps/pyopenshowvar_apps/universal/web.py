@@ -47,7 +47,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from ..web.httpguard import HEAD_TIMEOUT, TOTAL, ConnectionGuard, LogLimit, guarded_protocols
 from ..web.policy import TokenBucket, Violation, parse_message, refuse_connection
-from ..web.server import LOOPBACK_HOSTS, MAX_MESSAGE, STATIC, _SecurityHeaders
+from ..web.server import _CLOSED, LOOPBACK_HOSTS, MAX_MESSAGE, STATIC, _SecurityHeaders
 from .inputs import InputDevice, InputSample
 
 __all__ = ["HOLD_TIMEOUT", "ViewServer", "WebInput", "create_app"]
@@ -145,7 +145,7 @@ def create_app(
     limit = LogLimit(log)  # what pages do wrong is logged, but never floods the log
 
     async def close(ws: WebSocket, code: int, reason: str) -> None:
-        with contextlib.suppress(WebSocketDisconnect, OSError, RuntimeError):
+        with contextlib.suppress(*_CLOSED):  # the pad's list of "the page has gone"
             await ws.close(code=code, reason=reason)
 
     async def sender(page: _Page) -> None:
@@ -209,7 +209,7 @@ def create_app(
                     page.wake.set()
                 # one message per turn of the event loop: a flooding page cannot stall others
                 await asyncio.sleep(0)
-        except (WebSocketDisconnect, OSError, RuntimeError):
+        except _CLOSED:
             pass  # a page going away is normal, never a traceback
         finally:
             pages.discard(page)
