@@ -317,6 +317,26 @@ async def test_jog_stops_before_the_software_limit() -> None:
             await ws.close()
 
 
+async def test_jog_limit_uses_a_fresh_axis_sample_not_the_live_view() -> None:
+    """The page's live view may lag (here it polls twice a second): the room left before the
+    software limit is computed from $AXIS_ACT read together with JOG_COUNT, so a stale view
+    cannot carry the robot past the margin."""
+    config = jog_config()
+    async with Emulator(config) as emu:
+        emu.store.set_system("$SOFTP_END[1]", 3.0)
+        async with (
+            WebServer("127.0.0.1", emu.port, token=TOKEN, emulated=True, hz=2.0) as web,
+            Client("127.0.0.1", emu.port) as kvp,
+        ):
+            await until(lambda: _true(web.link.seq > 1))
+            ws = await page(web)
+            await hold(ws, 1.5)
+            a1 = await settled(kvp)
+            assert 1.0 < a1 <= 3.0 - 0.5 + 1e-6
+            assert web.jog.last_stop is not None and "limit" in web.jog.last_stop[0]
+            await ws.close()
+
+
 async def _true(value: bool) -> bool:
     return value
 

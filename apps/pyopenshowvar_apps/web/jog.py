@@ -5,11 +5,13 @@ button is held (every 25 ms); it sends ``release`` when the button comes up, the
 is cancelled, the window loses focus or the tab is hidden. :class:`JogController` turns that
 into KVP traffic on its own connection:
 
-* press: read ``JOG_COUNT``, then write the increment and accelerations, ``JOG_UNTIL`` (a few
+* press: read ``JOG_COUNT`` with the robot's axes and pose, then write the increment and accelerations, ``JOG_UNTIL`` (a few
   increments ahead) and ``JOG_MODE``;
-* while held, every :data:`TOPUP` s: read ``JOG_COUNT`` and move ``JOG_UNTIL`` to
+* while held, every :data:`TOPUP` s: read ``JOG_COUNT`` (again with the axes and pose) and move ``JOG_UNTIL`` to
   :data:`~.jogplan.CREDIT` increments ahead of it, but never past what the software limits
-  (axes) or the reachable workspace (Cartesian) allow, nor past the end of a step;
+  (axes) or the reachable workspace (Cartesian) allow, nor past the end of a step. The room
+  is measured from axes read in the same batch as the count, never from the live view, which
+  may be a poll period old: the robot would have used that room already;
 * a keep-alive may change the jog override only (anything else stops the jog);
 * release, a dropped WebSocket, :data:`HOLD_TIMEOUT` without a keep-alive, or a failed write:
   the increment zeroed first, then ``JOG_UNTIL = 0`` and ``JOG_MODE = 0``, pipelined.
@@ -39,7 +41,7 @@ from pyopenshowvar.kinematics import (
 )
 
 from .jogplan import CREDIT, JogPlan, JogRequest, plan_jog
-from .link import RobotLink
+from .link import RobotLink, axes_of, frame6
 
 __all__ = ["HOLD_TIMEOUT", "TOPUP", "JogController"]
 
@@ -56,6 +58,15 @@ IN_FLIGHT = 3
 LIMIT_MARGIN = 0.5
 #: A Cartesian jog stops before a joint would jump this far (deg): a wrist singularity.
 JUMP = 20.0
+
+
+@dataclass(frozen=True)
+class _Sample:
+    """JOG_COUNT and where the robot is, read in one pipelined batch."""
+
+    count: int
+    axes: np.ndarray | None
+    pose: np.ndarray | None
 
 
 @dataclass
@@ -152,13 +163,18 @@ class JogController:
             self._done[owner] = press
             return reason
         plan = plan_jog(req, self.model)
-        credit = self._credit(req, plan, whole=req.step is not None)
-        if credit <= 0 or (plan.count is not None and credit < plan.count):
-            self._done[owner] = press
-            return self._limit_text(req)
         async with self._lock:
             try:
-                start = int(await self.client.read("JOG_COUNT"))
+                sample = await self._sample()
+            except (KvpError, OSError, ValueError) as exc:
+                self._done[owner] = press
+                return f"cannot read the robot: {exc}"
+            credit = self._credit(req, plan, sample, whole=req.step is not None)
+            if credit <= 0 or (plan.count is not None and credit < plan.count):
+                self._done[owner] = press
+                return self._limit_text(req)
+            start = sample.count
+            try:
                 self.jog = _Jog(owner, press, req, plan, start, now, last_topup=now)
                 until = plan.until(start, start, min(credit, self.credit))
                 await self.client.write_many(plan.start_writes(until))
@@ -233,18 +249,18 @@ class JogController:
             await self.stop(jog.owner, "the live state of the robot is lost")
             return
         try:
-            seen = int(await self.client.read("JOG_COUNT"))
+            sample = await self._sample()
         except (KvpError, OSError, ValueError) as exc:
             await self.stop(jog.owner, f"cannot read JOG_COUNT: {exc}")
             return
-        plan = jog.plan
+        seen, plan = sample.count, jog.plan
         if plan.count is not None:
             if seen - jog.start >= plan.count:
                 await self.stop(jog.owner, "step done")
                 return
             credit = self.credit  # the whole step was checked against the limits at the press
         else:
-            credit = min(self.credit, self._credit(jog.req, plan, whole=False))
+            credit = min(self.credit, self._credit(jog.req, plan, sample, whole=False))
         if credit <= 0:
             await self.stop(jog.owner, self._limit_text(jog.req))
             return
@@ -259,11 +275,18 @@ class JogController:
                 self.last_stop = (f"write failed: {exc}", time.monotonic())
                 await self._zero(plan)
 
-    def _credit(self, req: JogRequest, plan: JogPlan, *, whole: bool) -> int:
+    async def _sample(self) -> _Sample:
+        """JOG_COUNT, $AXIS_ACT and $POS_ACT in one batch: the count and the position the
+        credit is measured from belong to the same moment (within one round trip)."""
+        got = await self.client.read_many(["JOG_COUNT", "$AXIS_ACT", "$POS_ACT"], typed=True)
+        count = int(got["JOG_COUNT"].unwrap())
+        return _Sample(count, axes_of(got["$AXIS_ACT"].value), frame6(got["$POS_ACT"].value))
+
+    def _credit(self, req: JogRequest, plan: JogPlan, sample: _Sample, *, whole: bool) -> int:
         """Increments the robot may plan without passing a limit (``whole``: the full step)."""
         need = plan.count if whole and plan.count is not None else self.credit
         if req.frame == "axis":
-            q = self.link.axes()
+            q = sample.axes
             if q is None:
                 return 0
             lo, hi = self.link.limits()
@@ -271,12 +294,13 @@ class JogController:
             room = float(hi[i] - q[i] if req.direction > 0 else q[i] - lo[i]) - LIMIT_MARGIN
             fit = math.floor(room / step + 1e-9) - (0 if whole else IN_FLIGHT)
             return max(0, min(need, fit))
-        return need if self._reachable(req, plan, need + (0 if whole else IN_FLIGHT)) else 0
+        n = need + (0 if whole else IN_FLIGHT)
+        return need if self._reachable(req, plan, sample, n) else 0
 
-    def _reachable(self, req: JogRequest, plan: JogPlan, n: int) -> bool:
+    def _reachable(self, req: JogRequest, plan: JogPlan, sample: _Sample, n: int) -> bool:
         """Whether the TCP can go ``n`` increments on without leaving the workspace or the
         limits, or swinging a joint through a singularity (the KRC would stop the program)."""
-        pose, q = self.link.pose(), self.link.axes()
+        pose, q = sample.pose, sample.axes
         if pose is None or q is None:
             return False
         tool, base = self.link.frame("$TOOL"), self.link.frame("$BASE")

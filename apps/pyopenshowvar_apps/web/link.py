@@ -48,9 +48,17 @@ _AXES = ("A1", "A2", "A3", "A4", "A5", "A6")
 _POSE = ("X", "Y", "Z", "A", "B", "C")
 
 
-def _frame6(value: object) -> np.ndarray | None:
+def frame6(value: object) -> np.ndarray | None:
+    """X, Y, Z, A, B, C of a FRAME/POS/E6POS value, or None if it is not one."""
     if isinstance(value, Struct) and all(k in value for k in _POSE):
         return np.array([float(value[k]) for k in _POSE])  # type: ignore[arg-type]
+    return None
+
+
+def axes_of(value: object) -> np.ndarray | None:
+    """A1..A6 of an AXIS/E6AXIS value, or None if it is not one."""
+    if isinstance(value, Struct) and all(k in value for k in _AXES):
+        return np.array([float(value[k]) for k in _AXES])  # type: ignore[arg-type]
     return None
 
 
@@ -107,16 +115,13 @@ class RobotLink:
 
     # --- state the jog controller uses ------------------------------------------------------
     def axes(self) -> np.ndarray | None:
-        v = self.values.get("$AXIS_ACT")
-        if isinstance(v, Struct) and all(k in v for k in _AXES):
-            return np.array([float(v[k]) for k in _AXES])  # type: ignore[arg-type]
-        return None
+        return axes_of(self.values.get("$AXIS_ACT"))
 
     def pose(self) -> np.ndarray | None:
-        return _frame6(self.values.get("$POS_ACT"))
+        return frame6(self.values.get("$POS_ACT"))
 
     def frame(self, name: str) -> np.ndarray | None:
-        return _frame6(self.values.get(name))
+        return frame6(self.values.get(name))
 
     def limits(self) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = self.values.get("$SOFTN_END[]"), self.values.get("$SOFTP_END[]")
