@@ -4,17 +4,23 @@
 curvature of the joint path *at its IK nodes*. Close to a singularity (the arm stretched, the
 wrist near A5 = 0) the curvature between two nodes can grow faster than the nodes sample it,
 and the set-points the drives get then ask an axis for more than its limit (a random LIN with
-4.5 kg ending near the arm-stretched singularity asked A2 for 1.22× its limit).
+4.5 kg ending near the arm-stretched singularity asked A2 for 1.22× its limit; the first chord
+of a path can understate its slope, 1.34× in a first cycle).
 
 A KRC limits the axis accelerations of a CP motion on what it commands. So does
-:func:`check_accelerations`: it samples the planned profile every half IPO cycle, solves those
-poses with IK as the kernel will, and takes second differences: the acceleration the drives
-see, averaged over one cycle. Every sample at or below the limit bounds the IPO set-points
-(a second difference over two 12 ms steps is a positive mix of those over 6 ms steps, so both
-phases of the cycle on this grid are covered, and the end of the motion, where it stops between
-two cycles, is sampled too). Where a sample exceeds the limit, the acceleration rows of the
-nodes under it are tightened by the excess (:meth:`~.path.PathLimits.tighten`) and the
-profile is planned again; a motion that is within its limits keeps its timing unchanged.
+:func:`check_accelerations`: it samples the planned profile every quarter IPO cycle, from the
+standing position before it to the one after it, solves those poses with IK as the kernel
+will, and takes second differences over one cycle at each of the four phases (a motion queued
+behind another starts at any phase of the cycle): the accelerations the drives see. A
+difference that straddles the start or the stop is divided by the share of its window inside
+the motion, so that the motion's own part keeps the limit whatever stands or moves next to it
+(an exact stop whose next motion starts within the same cycle adds the two parts). Where one
+exceeds the limit, the acceleration rows of the nodes under it are tightened by the excess
+(:meth:`~.path.PathLimits.tighten`) and the profile is planned again; a motion within its
+limits keeps its timing exactly.
+
+:func:`blend_ratio` checks a C_DIS window between two LINs the same way (the kernel superposes
+the lines in Cartesian space, so in the window the axes follow neither joint path).
 """
 
 from __future__ import annotations
@@ -36,6 +42,9 @@ ROUNDS = 8
 AIM = 0.97
 #: Phases of the IPO cycle checked (samples every ipo / PHASES, differences over one cycle).
 PHASES = STEP = 4
+#: The smallest share of a difference's window inside the motion that is scaled up to the
+#: whole window (below it, the motion's share is too brief to say what it asks of the axis).
+MIN_SHARE = 0.25
 #: Ratios up to this count as within the limit (float rounding).
 TOLERANCE = 1e-9
 
@@ -48,7 +57,7 @@ def _sampled_ratio(
 ) -> Generator[None, None, tuple[FloatArray, FloatArray]]:
     """Per sample ``t = j·h`` of the profile: the worst axis acceleration / limit, and ``s``.
 
-    The samples run from one step before the start to two after the end (the robot stands
+    The samples run from one cycle before the start to one after the end (the robot stands
     there), so the start and the stop are second differences like any other."""
     profile = Profile(*curve)
     n = math.ceil(profile.duration / h) + 2 * STEP
@@ -61,16 +70,30 @@ def _sampled_ratio(
         yield
     q = q - 360.0 * np.round((q - near) / 360.0)  # the turn the joint path is on
     acc = np.abs(q[2 * STEP :] - 2.0 * q[STEP:-STEP] + q[: -2 * STEP]) / (STEP * h) ** 2
+    # A difference that straddles the start or the stop weighs the motion's own acceleration
+    # with the part of its window inside the motion; the rest is the robot standing. Another
+    # motion may take that part (an exact stop, the next one starting within the same cycle),
+    # so the motion's own share must keep the limit by itself: divide by its weight.
+    centre = np.asarray(times[STEP:-STEP], dtype=np.float64) / (STEP * h)  # in cycles
+    inside = _tri_cdf(profile.duration / (STEP * h) - centre) - _tri_cdf(-centre)
     with np.errstate(invalid="ignore"):
         ratio = np.nan_to_num(np.max(acc / limits.a_limit, axis=1))
+    ratio = ratio / np.maximum(inside, MIN_SHARE)
     return ratio, s
+
+
+def _tri_cdf(u: FloatArray) -> FloatArray:
+    """Share of a second difference's weight (a triangle over ``[-1, 1]`` cycles) below ``u``."""
+    u = np.clip(u, -1.0, 1.0)
+    return np.asarray(np.where(u <= 0.0, 0.5 * (1.0 + u) ** 2, 1.0 - 0.5 * (1.0 - u) ** 2))
 
 
 def check_accelerations(
     limits: PathLimits, curve: Curve, bw: Curve, solve: Solve, ipo: float
 ) -> Generator[None, None, tuple[Curve, Curve]]:
-    """``(curve, bw)`` of :meth:`PathLimits.plan`, re-planned until the set-points sampled every
-    ``ipo / 2`` keep every axis within its acceleration limit (module docstring).
+    """``(curve, bw)`` of :meth:`PathLimits.plan`, re-planned until the set-points sampled at
+    ``PHASES`` phases of the cycle keep every axis within its acceleration limit (module
+    docstring).
 
     ``solve(s, near)`` gives the axes at path parameters ``s`` (IK nearest ``near``)."""
     h = ipo / PHASES
