@@ -317,10 +317,12 @@ NEAR_SINGULAR_LINS = {
 }  # fmt: skip
 
 
-def lin_set_points(load: str, start: list[float], targets: list[np.ndarray], cdis: float) -> Any:
+def lin_set_points(
+    load: str, start: list[float], targets: list[np.ndarray], cdis: float, poses: bool = False
+) -> Any:
     """The set-points of LINs from ``start`` through ``targets`` (axes, FK'd with the nominal
-    model), C_DIS ``cdis`` between them, from the standing position before the first cycle on
-    (the first cycle's acceleration counts too)."""
+    model; ``poses``: X, Y, Z, A, B, C), C_DIS ``cdis`` between them (0: exact stops), from the
+    standing position before the first cycle on (the first cycle's acceleration counts too)."""
     store = VariableStore()
     store.write("$LOAD", load)
     store.write("$APO.CDIS", str(cdis))
@@ -331,7 +333,8 @@ def lin_set_points(load: str, start: list[float], targets: list[np.ndarray], cdi
         kernel.tick()
     kernel.trace = [(0.0, kernel.q.copy(), kernel.qd.copy())]
     for i, target in enumerate(targets):
-        kernel.lin(forward(M, target), approx=i < len(targets) - 1)
+        pose = target if poses else forward(M, target)
+        kernel.lin(pose, approx=cdis > 0.0 and i < len(targets) - 1)
     while kernel.moving:
         kernel.tick()
     kernel.tick()
@@ -367,4 +370,23 @@ def test_blended_lins_stay_within_the_axis_accelerations(chain: int) -> None:
     there (the blend's rows only saw the axis speeds at the window's two ends)."""
     cdis, start, targets = BLENDED_LINS[chain]
     trace = lin_set_points("{M 0.0}", start, [np.array(t) for t in targets], cdis)
+    assert accel_ratio(trace) <= 1.0 + 1e-9
+
+
+def test_lins_stopping_exactly_keep_the_limits_where_one_ends_and_the_next_starts() -> None:
+    """An exact stop: the next LIN starts within the cycle the last one ends in, and both add
+    to that cycle's acceleration (A2 reverses there). Each LIN was checked on its own from and
+    to standing, and the junction reached 1.04× A2's limit (a C_LIN chain of
+    bench/plant_settle.py whose second blend was refused: 1.06×)."""
+    poses = [
+        [180.43063936834005, -784.9901031053249, 756.8548305428734, 32.404591150060924,
+         74.4895511301476, 40.59806497024183],
+        [190.9457201107802, -702.8610960875283, 881.2481509981878, 159.30272937980342,
+         87.46024372569214, 164.37610484557675],
+        [-12.81595025610784, -732.9112398536081, 883.967550950529, -118.46713310653995,
+         82.91139954407149, -88.7897544093167],
+    ]  # fmt: skip
+    start = [-87.49329870321843, -153.3336737164296, 1.0317904522363506, 73.15356359189343,
+             60.14452270352393, -304.2972703888534]  # fmt: skip
+    trace = lin_set_points("{M 0.0}", start, [np.array(p) for p in poses], 0.0, poses=True)
     assert accel_ratio(trace) <= 1.0 + 1e-9
