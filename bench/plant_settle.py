@@ -12,9 +12,12 @@ the set-point) and the CPU the ticks cost (% of one core at real time, no reader
 Part 2, **planning** (the controller's set-points against the plant's motors): random PTP,
 LIN ($VEL.CP 2 m/s), C_PTP chains (three targets, $APO.CPTP 50 %, all planned before the
 first starts) and C_PTP chains whose next targets are planned while the robot runs (as a
-follower program does; random $APO.CPTP 10–100 %) with payloads 0, 4.5 and 6 kg. For every IPO cycle the torque the plant's motors need to follow the set-points
-(the plant's inverse dynamics at the cycle's mean acceleration + its friction) over the
-plant's max torque, and the set-point acceleration over the axis' limit; the worst of each.
+follower program does; random $APO.CPTP 10–100 %) and C_LIN chains (three LINs of up to
+±20° per axis, random $APO.CDIS 5–100 mm) with payloads 0, 4.5 and 6 kg. For every IPO cycle,
+from the standing position before the first one on, the torque the plant's motors need to
+follow the set-points (the plant's inverse dynamics at the cycle's mean acceleration + its
+friction) over the plant's max torque, and the set-point acceleration over the axis' limit;
+the worst of each.
 Plus the case the issue names: HOME, A3 alone at full acceleration with 6 kg.
 
     .venv/bin/python bench/plant_settle.py [--quick] [--poses 40] [--moves 20] [--json PATH]
@@ -162,12 +165,12 @@ class Needs:
         self.accel = max(self.accel, float(np.max(acc)))
 
 
-def planner_case(mass: float, moves: int, seed: int) -> tuple[Needs, Needs, Needs, Needs]:
-    """(PTP, LIN, C_PTP, C_PTP planned while running) worst needs over ``moves`` random moves
-    of each kind."""
+def planner_case(mass: float, moves: int, seed: int) -> tuple[Needs, ...]:
+    """(PTP, LIN, C_PTP, C_PTP planned while running, C_LIN) worst needs over ``moves``
+    random moves of each kind."""
     rng = np.random.default_rng(seed)
     out = []
-    for kind in ("PTP", "LIN", "C_PTP", "C_PTP live"):
+    for kind in ("PTP", "LIN", "C_PTP", "C_PTP live", "C_LIN"):
         needs: Needs | None = None
         for k in range(moves):
             store = VariableStore()
@@ -191,7 +194,8 @@ def planner_case(mass: float, moves: int, seed: int) -> tuple[Needs, Needs, Need
                 kernel.ptp(start)
                 while kernel.moving:
                     robot.tick()
-                kernel.trace = []
+                # from the standing position on: the first cycle's acceleration counts too
+                kernel.trace = [(kernel.time, kernel.q.copy(), kernel.qd.copy())]
                 if kind == "PTP":
                     kernel.ptp(random_pose(rng))
                 elif kind == "C_PTP":
@@ -201,6 +205,12 @@ def planner_case(mass: float, moves: int, seed: int) -> tuple[Needs, Needs, Need
                     kernel.ptp(random_pose(rng))
                 elif kind == "C_PTP live":
                     live_chain(robot, rng)
+                elif kind == "C_LIN":
+                    store.write("$APO.CDIS", f"{rng.uniform(5.0, 100.0):.1f}")
+                    q = start
+                    for i in range(3):
+                        q = np.clip(q + rng.uniform(-20.0, 20.0, 6), M.lower * 0.9, M.upper * 0.9)
+                        kernel.lin(forward(M, q), approx=i < 2)
                 else:
                     end = start + rng.uniform(-30.0, 30.0, 6)
                     end = np.clip(end, M.lower * 0.9, M.upper * 0.9)
@@ -215,7 +225,7 @@ def planner_case(mass: float, moves: int, seed: int) -> tuple[Needs, Needs, Need
             needs.trace([s[1] for s in kernel.trace], f"{kind} {mass:g} kg")
         assert needs is not None
         out.append(needs)
-    return out[0], out[1], out[2], out[3]
+    return tuple(out)
 
 
 def live_chain(robot: Robot, rng: np.random.Generator) -> None:
@@ -289,7 +299,7 @@ def main() -> None:
         ]  # fmt: skip
     for mass in masses:
         label = f"{mass:g} kg"
-        kinds = ("PTP", "LIN", "C_PTP", "C_PTP planned while running")
+        kinds = ("PTP", "LIN", "C_PTP", "C_PTP planned while running", "C_LIN")
         needs = planner_case(mass, moves, seed=int(mass * 10) + 7)
         rows += [
             Row(f"{label}: worst needed torque / max torque, {kind}", n.torque, "ratio")

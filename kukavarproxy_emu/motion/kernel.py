@@ -49,6 +49,7 @@ from .dynamics import ControllerDynamics, MachineData
 from .path import LinGeometry, PathLimits, PathRefused, joint_path, leave_wrist_singularity
 from .profiles import FloatArray, Profile
 from .publish import Publisher
+from .retime import blend_ratio, check_accelerations
 from .segments import ConstLimits, Kind, Segment, blend, rotation_log, rotvec_matrix
 
 __all__ = ["DEFAULT_INERTIA", "MotionKernel", "MotionRefused", "PlanJob"]
@@ -65,6 +66,8 @@ OV_BISECT = 12
 WRIST_SINGULAR = 1e-6
 #: KRC machine datum $APO_DIS_PTP (deg): 100 % C_PTP would start blending this far out.
 APO_DIS_PTP = 90.0
+#: Tries to blend two LINs within the axis accelerations before they stop exactly instead.
+BLEND_TRIES = 4
 TraceSample = tuple[float, FloatArray, FloatArray]
 T = TypeVar("T")
 
@@ -417,6 +420,15 @@ class MotionKernel(Publisher):
                 limits.constrain(*(yield from self.dynamics.path_rows(q, limits.qp, limits.qpp)))
                 yield
             curve, bw = yield from limits.plan()
+            lin_tool, lin_base = frames
+
+            def solve(s_at: FloatArray, near: FloatArray) -> FloatArray:
+                poses = geo.poses(s_at)
+                return inverse(
+                    self.model, poses, current=near, tool=lin_tool, base=lin_base, errors="nan"
+                )
+
+            curve, bw = yield from check_accelerations(limits, curve, bw, solve, self.ipo)
             profile = Profile(*curve)
         except PathRefused as exc:
             raise MotionRefused(f"{label}: {exc}") from None
@@ -454,9 +466,40 @@ class MotionKernel(Publisher):
                     return 0.0
                 return before.progress if before in self.active else 1.0
 
-            yield from blend(before, seg, progress)
+            if seg.kind is Kind.LIN and before.kind is Kind.LIN:
+                yield from self._blend_lin(before, seg, progress)
+            else:
+                yield from blend(before, seg, progress)
         self.pending.append(seg)
         self.planned_q = seg.end_q.copy()
+
+    def _blend_lin(
+        self, cur: Segment, nxt: Segment, progress: Callable[[], float]
+    ) -> Generator[None, None, None]:
+        """Blend two LINs so that the axes keep their accelerations in the window, where
+        they follow neither line (:func:`.retime.blend_ratio`): a window too fast is undone at
+        once (no cycle ran since it was made) and made again slower; at worst no blend."""
+        saved = (cur.profile, cur.blend_at, nxt.profile, nxt.head_end)
+        end = fk_matrix(self.model, cur.end_q, *self._frames)
+        base = end.copy()
+        base[:3, 3] -= cur.delta
+        base[:3, :3] = rotvec_matrix(cur.rotvec).T @ end[:3, :3]
+        tool, frame = self._frames
+
+        def solve(poses: FloatArray, near: FloatArray) -> FloatArray:
+            return np.asarray(
+                inverse(self.model, poses, current=near, tool=tool, base=frame, errors="nan")
+            )
+
+        slower = 1.0
+        for _ in range(BLEND_TRIES):
+            if not (yield from blend(cur, nxt, progress, slower)):
+                return
+            ratio = blend_ratio(cur, nxt, base, solve, self.ipo)
+            if ratio <= 1.0 + 1e-9:
+                return
+            cur.profile, cur.blend_at, nxt.profile, nxt.head_end = saved
+            slower *= 0.97 / ratio
 
     def stop(self, *, hard: bool = False) -> None:
         """Forget the planned motions; the running ones end exactly (``hard``: at once)."""

@@ -267,6 +267,7 @@ class PathLimits:
         # path whose slope and curvature vary in between: near a singularity the two terms
         # nearly cancel, and one sample of each would under- or over-state either); the
         # constraint is linear in (q', q''), so the four corners bound the whole range
+        self.a_limit = a_axis
         amax = self.a_axis = a_axis * ACCEL_MARGIN
         slopes = (np.vstack([self.chord[:1], self.chord]), np.vstack([self.chord, self.chord[-1:]]))
         gams, betas, stills = [], [], []
@@ -280,10 +281,13 @@ class PathLimits:
                         np.where(~moving & (np.abs(curve) > 0), amax / np.abs(curve), np.inf)
                     )
         gam, beta, still = np.hstack(gams), np.hstack(betas), np.hstack(stills)
+        #: the axis rows' γ (the first columns) and their speed caps, for :meth:`tighten`
+        self._axis_gam, self._still = gam, np.min(still, axis=1)
+        self._speed_cap, self._extra_cap = xcap, np.full(len(s), np.inf)
         a_s = min(a_cp, _BIG)
         gam = np.hstack([gam, np.full((len(s), 1), a_s)])
         beta = np.hstack([beta, np.zeros((len(s), 1))])
-        self._xcap0 = np.minimum(xcap, np.min(still, axis=1))
+        self._xcap0 = np.minimum(xcap, self._still)
         self._rows = (-gam, beta, gam)
         self._finish()
 
@@ -293,6 +297,7 @@ class PathLimits:
         """Add rows ``α + β·ṡ² ≤ s̈ ≤ γ + β·ṡ²`` (``(nodes, k)`` arrays) and a cap on ṡ² per
         node (the motors' torque, :meth:`.dynamics.ControllerDynamics.path_rows`)."""
         a0, b0, g0 = self._rows
+        self._extra_cap = np.minimum(self._extra_cap, cap)
         # only the pairs that involve a new row can lower the cap further
         xcap = np.minimum(self.xcap, cap)
         for lo_rows, hi_rows in (
@@ -302,6 +307,25 @@ class PathLimits:
         ):
             xcap = np.minimum(xcap, _pair_cap(*lo_rows, *hi_rows))
         self._rows = (np.hstack([a0, alp]), np.hstack([b0, beta]), np.hstack([g0, gam]))
+        self._set_cap(xcap)
+
+    def tighten(self, factor: FloatArray) -> None:
+        """Scale the axis-acceleration rows of each node by ``factor`` (≤ 1, per node, relative
+        to the rows first built): where the nodes sample the joint path too coarsely for the
+        rows to hold on the set-points (:mod:`.retime`), the profile slows down there."""
+        alp, beta, gam = (r.copy() for r in self._rows)
+        cols = self._axis_gam.shape[1]
+        gam[:, :cols] = self._axis_gam * factor[:, None]
+        alp[:, :cols] = -gam[:, :cols]
+        self._rows = (alp, beta, gam)
+        nodes = np.flatnonzero(factor < 1.0)  # the other nodes' caps stay as they are
+        xcap = self.xcap.copy()
+        xcap[nodes] = np.minimum.reduce([
+            self._speed_cap[nodes],
+            self._still[nodes] * factor[nodes],
+            self._extra_cap[nodes],
+            _pair_cap(alp[nodes], beta[nodes], gam[nodes], beta[nodes]),
+        ])  # fmt: skip
         self._set_cap(xcap)
 
     def _finish(self) -> None:

@@ -152,8 +152,13 @@ class Segment:
         return self.limits.a_axis
 
 
-def blend(cur: Segment, nxt: Segment, progress: Callable[[], float]) -> Generator[None, None, bool]:
+def blend(
+    cur: Segment, nxt: Segment, progress: Callable[[], float], ease: float = 1.0
+) -> Generator[None, None, bool]:
     """Re-time ``cur``'s tail and ``nxt``'s head for approximation (module docstring).
+
+    ``ease`` (≤ 1) scales the window's accelerations further down (the speeds by its root):
+    for LINs, whose axes in the window follow neither line (:func:`.retime.blend_ratio`).
 
     ``progress()`` says where ``cur`` is now (it may run while this yields). Returns False,
     changing nothing, when no approximation is possible: no ``$APO``, a zero-length segment,
@@ -187,7 +192,7 @@ def blend(cur: Segment, nxt: Segment, progress: Callable[[], float]) -> Generato
         moving = dv > 1e-12
         if np.any(moving):
             lam2 = min(lam2, float(np.min(2.0 * frac * lim[moving] / (v_a * dv[moving]))))
-    lam = math.sqrt(lam2)
+    lam = math.sqrt(lam2 * ease)
     v_a, v_b = lam * v_a, lam * v_b
     old = cur.profile.curve()
     try:

@@ -279,3 +279,114 @@ def test_load_is_read_when_planning() -> None:
     assert durations[1] > durations[0] * 1.1, durations
     assert isinstance(payload_of(VariableStore().get("$LOAD")), type(None))
     assert isinstance(VariableStore().get("$LOAD"), Struct)
+
+
+# Random LINs (bench/plant_settle.py's generator, seeds 7 / 52 / 67: 20 moves of each kind per
+# payload) whose set-points went past an axis' acceleration limit: ending close to the
+# arm-stretched singularity (4.5 kg: A2 at 1.22×), in the last cycle (1.03×), and in the first
+# one, where the first chord of the joint path understates its slope (6 kg: A2 at 1.34×).
+NEAR_SINGULAR_LINS = {
+    "4.5 kg, ends near the arm-stretched singularity": (
+        "{M 4.5, CM {X 24.6, Y -7.7, Z 86.8}, J {X 0.00788, Y 0.00319, Z 0.00815}}",
+        [-26.01515868315127, 31.439268549121266, 5.915201931363626, -67.9934905551789,
+         25.32620991710911, -145.07769489038014],
+        [-34.12154225338973, 7.911542849189537, 3.7815153372101165, -80.13341407540693,
+         39.179579910719475, -157.71684226203342],
+    ),
+    "4.5 kg, arm near stretched": (
+        "{M 4.5, CM {X 24.0, Y -4.1, Z 63.3}, J {X 0.00556, Y 0.00234, Z 0.00499}}",
+        [47.045858310277, -32.2784992850892, 30.72556001531845, 31.93675927154851,
+         80.1671826541369, 300.7505374358699],
+        [59.21654304763072, -7.347070565276525, 7.906251383434142, 45.4801663218166,
+         97.76131508028945, 286.07889151878453],
+    ),
+    "no load, the last cycle": (
+        "{M 0.0}",
+        [14.696803089407894, -18.373093783091434, -13.245120041438497, 110.10334424619327,
+         90.60408280196361, -70.91765269429399],
+        [-7.0342276495962395, -2.7506960236805043, 16.331811483477864, 88.98263317191716,
+         103.36462336565151, -51.39824867629157],
+    ),
+    "6 kg, the first cycle": (
+        "{M 6.0, CM {X -43.0, Y 3.5, Z 67.9}, J {X 0.01438, Y 0.01400, Z 0.00635}}",
+        [-99.22821901614364, -104.14405973701203, 5.775836843967269, 124.52706312594466,
+         68.31991010806684, -257.55114469880607],
+        [-120.85857661547476, -132.0568531094555, 18.557222951304816, 98.94665625245482,
+         49.53134807635409, -284.50364397348636],
+    ),
+}  # fmt: skip
+
+
+def lin_set_points(
+    load: str, start: list[float], targets: list[np.ndarray], cdis: float, poses: bool = False
+) -> Any:
+    """The set-points of LINs from ``start`` through ``targets`` (axes, FK'd with the nominal
+    model; ``poses``: X, Y, Z, A, B, C), C_DIS ``cdis`` between them (0: exact stops), from the
+    standing position before the first cycle on (the first cycle's acceleration counts too)."""
+    store = VariableStore()
+    store.write("$LOAD", load)
+    store.write("$APO.CDIS", str(cdis))
+    kernel = SetPoints(store)
+    assert kernel.dynamics is not None  # plans with the load
+    kernel.ptp(np.array(start))
+    while kernel.moving:
+        kernel.tick()
+    kernel.trace = [(0.0, kernel.q.copy(), kernel.qd.copy())]
+    for i, target in enumerate(targets):
+        pose = target if poses else forward(M, target)
+        kernel.lin(pose, approx=cdis > 0.0 and i < len(targets) - 1)
+    while kernel.moving:
+        kernel.tick()
+    kernel.tick()
+    return [t[1] for t in kernel.trace]
+
+
+@pytest.mark.parametrize("case", list(NEAR_SINGULAR_LINS))
+def test_lins_near_a_singularity_stay_within_the_axis_accelerations(case: str) -> None:
+    """Every IPO set-point of a LIN keeps each axis' acceleration within its limit, also where
+    the joint path bends faster than its IK nodes sample it (a KRC limits axis accelerations
+    on CP motions). Before: 1.22×, 1.04×, 1.03× and 1.34× of A2's limit."""
+    load, start, end = NEAR_SINGULAR_LINS[case]
+    trace = lin_set_points(load, start, [np.array(end)], 0.0)
+    assert accel_ratio(trace) <= 1.0 + 1e-9
+
+
+BLENDED_LINS = [  # C_DIS mm, start axes, three targets (random chains of three LINs, seed 5)
+    (13.814, [133.2245, -93.7742, -64.3219, -166.4995, -94.9477, -179.7696],
+     [[129.9307, -89.7114, -45.0807, -150.8805, -105.2575, -175.3078],
+      [146.7924, -105.6473, -30.9191, -155.0376, -93.99, -182.4039],
+      [151.8213, -105.3666, -46.7423, -144.6455, -81.0722, -183.0845]]),
+    (70.002, [-73.1224, -69.4294, -46.1613, 130.6821, 97.1585, -270.2531],
+     [[-72.159, -82.0679, -49.9861, 140.3298, 105.6916, -282.6605],
+      [-78.8679, -85.0572, -54.5346, 147.6155, 108.0, -289.2433],
+      [-81.2193, -102.365, -59.8624, 165.4938, 108.0, -286.9556]]),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("chain", range(len(BLENDED_LINS)))
+def test_blended_lins_stay_within_the_axis_accelerations(chain: int) -> None:
+    """C_DIS windows: the kernel superposes the two lines in Cartesian space, so in the window
+    the axes follow neither joint path; these chains asked A2 for 1.34× and 1.39× its limit
+    there (the blend's rows only saw the axis speeds at the window's two ends)."""
+    cdis, start, targets = BLENDED_LINS[chain]
+    trace = lin_set_points("{M 0.0}", start, [np.array(t) for t in targets], cdis)
+    assert accel_ratio(trace) <= 1.0 + 1e-9
+
+
+def test_lins_stopping_exactly_keep_the_limits_where_one_ends_and_the_next_starts() -> None:
+    """An exact stop: the next LIN starts within the cycle the last one ends in, and both add
+    to that cycle's acceleration (A2 reverses there). Each LIN was checked on its own from and
+    to standing, and the junction reached 1.04× A2's limit (a C_LIN chain of
+    bench/plant_settle.py whose second blend was refused: 1.06×)."""
+    poses = [
+        [180.43063936834005, -784.9901031053249, 756.8548305428734, 32.404591150060924,
+         74.4895511301476, 40.59806497024183],
+        [190.9457201107802, -702.8610960875283, 881.2481509981878, 159.30272937980342,
+         87.46024372569214, 164.37610484557675],
+        [-12.81595025610784, -732.9112398536081, 883.967550950529, -118.46713310653995,
+         82.91139954407149, -88.7897544093167],
+    ]  # fmt: skip
+    start = [-87.49329870321843, -153.3336737164296, 1.0317904522363506, 73.15356359189343,
+             60.14452270352393, -304.2972703888534]  # fmt: skip
+    trace = lin_set_points("{M 0.0}", start, [np.array(p) for p in poses], 0.0, poses=True)
+    assert accel_ratio(trace) <= 1.0 + 1e-9
