@@ -34,6 +34,7 @@ from urllib.parse import urlsplit
 from pyopenshowvar_apps.names import is_motion_variable
 
 from .budget import MAX_VALUE_CHARS
+from .passwords import UserEntry, check_hash_format
 
 __all__ = [
     "CellConfig",
@@ -60,12 +61,6 @@ MAX_ROBOTS = 200
 
 class CellError(ValueError):
     """The cell file is not valid; the message names the file and the offending key."""
-
-
-@dataclass(frozen=True)
-class UserEntry:
-    name: str
-    password_hash: str
 
 
 @dataclass(frozen=True)
@@ -256,8 +251,6 @@ def _security(raw: Any, host: str, base: Path, where: str) -> SecurityConfig:
         _no_extra(u, {"name", "password_hash"}, what)
         uname = _str(u.get("name"), f"{what}.name")
         phash = _str(u.get("password_hash"), f"{what}.password_hash")
-        from .security import check_hash_format
-
         problem = check_hash_format(phash)
         if problem:
             raise CellError(
