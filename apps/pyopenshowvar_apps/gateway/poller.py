@@ -5,7 +5,7 @@ Each poll is ONE :meth:`Client.read_many` of :data:`~.mapping.POLL_VARIABLES` (t
 snapshot groups (a snapshot group is one read of a STRUC the controller fills, fanned out to
 its member variables). Only texts that changed since the last
 poll are parsed (the moving robot's fixed-format texts by the parser's fast paths), and only
-node values that changed are stored (:mod:`.live`: a DataValue is built only for a client that
+node values that changed are stored (:mod:`.livenodes`: a DataValue is built only for a client that
 reads or subscribes), so a robot at rest costs the event loop almost nothing beyond the KVP
 round trip. Every value carries the time the reply arrived as its SourceTimestamp. No robot
 can take the event loop from the others (:mod:`.budget`): a value longer than the robot's
@@ -40,7 +40,7 @@ from ..armpick import DEFAULT_CHOICE, choose_arm, given_arm
 from . import ua
 from .budget import ValueTooLongError, WorkBudget
 from .cell import RobotConfig, SnapshotGroup, canonical
-from .live import LiveNode, Sink
+from .livenodes import LiveNode, Sink
 from .mapping import (
     IDENTITY_VARIABLES,
     POLL_VARIABLES,

@@ -33,7 +33,7 @@ from asyncua.common.connection import TransportLimits
 
 from . import ua
 from .cell import CellConfig
-from .live import Sink
+from .livenodes import Sink
 from .model import GATEWAY_URI, Instantiator, load_nodesets
 from .poller import RobotPoller
 from .robotics import CellNodes, RobotBuilder, RobotNodes, build_cell

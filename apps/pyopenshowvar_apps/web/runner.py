@@ -21,7 +21,7 @@ from pyopenshowvar import Client
 from ..armpick import ArmChoice
 from .httpguard import HEAD_TIMEOUT, TOTAL, ConnectionGuard, guarded_protocols
 from .jog import JogController
-from .link import RobotLink
+from .robotlink import RobotLink
 from .server import MAX_MESSAGE, WebConfig, create_app
 
 __all__ = ["KRL_DIR", "WebServer", "is_loopback", "lan_address"]

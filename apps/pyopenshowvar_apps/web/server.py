@@ -50,7 +50,6 @@ from pyopenshowvar_apps.writecheck import check_literal, checked_write
 from .httpguard import LogLimit
 from .jog import JogController
 from .jogplan import AXIS_SPEED, CADENCE, CART_SPEED, STEP_SIZES
-from .link import MAX_WATCH, RobotLink
 from .policy import (
     RESTART_VARIABLE,
     TokenBucket,
@@ -61,6 +60,7 @@ from .policy import (
     variable_name,
     write_refusal,
 )
+from .robotlink import MAX_WATCH, RobotLink
 
 __all__ = ["MAX_MESSAGE", "MAX_PAGES", "WebConfig", "create_app"]
 
