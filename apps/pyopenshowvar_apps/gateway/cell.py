@@ -22,7 +22,6 @@ never a silently ignored option. Relative paths are relative to the cell file.
 
 from __future__ import annotations
 
-import ipaddress
 import re
 import tomllib
 from collections.abc import Mapping
@@ -31,6 +30,7 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
 
+from pyopenshowvar_apps.hosts import is_loopback
 from pyopenshowvar_apps.names import is_motion_variable
 
 from .budget import MAX_VALUE_CHARS
@@ -43,7 +43,6 @@ __all__ = [
     "SecurityConfig",
     "SnapshotGroup",
     "UserEntry",
-    "is_loopback",
     "load_cell",
     "parse_cell",
 ]
@@ -156,15 +155,6 @@ def canonical(name: str) -> str:
     """The form two valid KRL names are compared in: upper case (KRL is case-insensitive),
     without the blanks inside an index (``$OUT[ 1]`` is ``$OUT[1]``)."""
     return _INDEX.sub(lambda m: m.group(0).replace(" ", ""), name).upper()
-
-
-def is_loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
 
 
 def load_cell(path: str | Path) -> CellConfig:
