@@ -34,7 +34,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _common import EmuProcess, Row, base_parser, median, print_rows, write_json
+from _common import EmuProcess, Row, median, repeat_main
 
 from kukavarproxy_emu.latency import PROFILES, LatencyProfile
 from pyopenshowvar import Client, parse_value, sync
@@ -331,12 +331,7 @@ def run(quick: bool, repeat: int) -> tuple[list[Row], dict[str, Any]]:
 
 
 def main() -> None:
-    ap = base_parser(__doc__)
-    args = ap.parse_args()
-    repeat = args.repeat or (1 if args.quick else 5)
-    rows, extra = run(args.quick, repeat)
-    print_rows(f"Client (median of {repeat} runs)", rows)
-    write_json(args.json, "client", rows, extra)
+    repeat_main(__doc__, "Client (median of {repeat} runs)", "client", run, repeat=5)
 
 
 if __name__ == "__main__":
