@@ -1,8 +1,8 @@
 """The web page of ``kvp universal``: the jog pad as an input device, and the 3D view.
 
 A page of its own (``static/universal.html``, ``static/universal.js``) that reuses the web
-jog pad's assets — its style sheet and its 3D arm view (``/static/view3d.js`` is served from
-the pad's own folder, nothing is copied) — and the pad's safety rules:
+jog pad's assets — its head and style sheet and its 3D arm view (``/static/view3d.js`` is
+served from the pad's own folder, nothing is copied) — and the pad's safety rules:
 
 * **hold to move**: an axis button held sends ``jog`` at once and every 25 ms; the signal is
   non-zero only while those arrive (:data:`HOLD_TIMEOUT`); letting go, the pointer leaving,
@@ -40,14 +40,14 @@ from starlette.applications import Starlette
 from starlette.middleware import Middleware
 from starlette.middleware.trustedhost import TrustedHostMiddleware
 from starlette.requests import Request
-from starlette.responses import FileResponse, Response
+from starlette.responses import Response
 from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from ..web.httpguard import HEAD_TIMEOUT, TOTAL, ConnectionGuard, LogLimit, guarded_protocols
 from ..web.policy import TokenBucket, Violation, parse_message, refuse_connection
-from ..web.server import _CLOSED, LOOPBACK_HOSTS, MAX_MESSAGE, STATIC, _SecurityHeaders
+from ..web.server import _CLOSED, LOOPBACK_HOSTS, MAX_MESSAGE, STATIC, _SecurityHeaders, build_page
 from .inputs import InputDevice, InputSample
 
 __all__ = ["HOLD_TIMEOUT", "ViewServer", "WebInput", "create_app"]
@@ -138,8 +138,10 @@ def create_app(
 ) -> Starlette:
     """The page, its static files, the pad's static files and the WebSocket."""
 
+    html = build_page("kvp universal", OWN_STATIC / "universal.html", ["/u/universal.css"])
+
     async def index(request: Request) -> Response:
-        return FileResponse(OWN_STATIC / "universal.html")
+        return Response(html, media_type="text/html")
 
     pages: set[_Page] = set()
     limit = LogLimit(log)  # what pages do wrong is logged, but never floods the log

@@ -1,6 +1,7 @@
 """The web jog pad's HTTP and WebSocket server (Starlette): pages, the live stream, commands.
 
-``GET /`` is the page, ``/static/*`` its scripts and style (all shipped in the package, no
+``GET /`` is the page (:func:`build_page`: the head ``kvp universal``'s page shares, then
+``static/index.html``), ``/static/*`` its scripts and style (all shipped in the package, no
 CDN), ``/ws`` the WebSocket. Every page gets the latest state ``hz`` times a second, and sends
 jog, watch-list, read and write commands as small JSON messages.
 
@@ -30,7 +31,9 @@ import contextlib
 import json
 import logging
 import time
+from collections.abc import Sequence
 from pathlib import Path
+from string import Template
 from typing import Any
 
 from starlette.applications import Starlette
@@ -62,7 +65,7 @@ from .policy import (
 )
 from .robotlink import MAX_WATCH, RobotLink
 
-__all__ = ["MAX_MESSAGE", "MAX_PAGES", "WebConfig", "create_app"]
+__all__ = ["MAX_MESSAGE", "MAX_PAGES", "WebConfig", "build_page", "create_app"]
 
 log = logging.getLogger(__name__)
 
@@ -85,6 +88,16 @@ HEADERS = {
 #: web page from elsewhere that re-points its own name at 127.0.0.1 (DNS rebinding) must not
 #: reach it (its requests carry its own name in Host and Origin).
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1", "[::1]")
+
+
+def build_page(title: str, body: Path, styles: Sequence[str] = ()) -> bytes:
+    """A whole page: the head both pages share (``static/head.html``: viewport, theme, the
+    pad's style sheet) with ``title`` and the page's own ``styles``, then ``body`` (the file
+    holding the page from ``<body>`` on)."""
+    links = "".join(f'<link rel="stylesheet" href="{href}">\n' for href in styles)
+    head = Template((STATIC / "head.html").read_text(encoding="utf-8"))
+    text = head.substitute(title=title, styles=links) + body.read_text(encoding="utf-8")
+    return text.encode()
 
 
 class WebConfig:
@@ -164,7 +177,7 @@ class _PadServer:
         self.pages: set[_Page] = set()
         self.tasks: set[asyncio.Task[None]] = set()  # pages' KVP requests, kept until done
         self.limit = LogLimit(log)  # what pages do wrong is logged, but never floods the log
-        self.html = (STATIC / "index.html").read_bytes()  # small: served from memory
+        self.html = build_page("kvp web", STATIC / "index.html")  # small: served from memory
         link.listeners.append(self.on_state)
 
     def on_state(self, state: dict[str, Any]) -> None:
