@@ -27,7 +27,6 @@ import time
 from datetime import UTC, datetime
 from types import TracebackType
 from typing import Self
-from urllib.parse import urlsplit
 
 from asyncua.common.connection import TransportLimits
 
@@ -245,7 +244,3 @@ def _version() -> str:
 
 def _url_host(host: str) -> str:
     return f"[{host}]" if ":" in host else host
-
-
-def endpoint_port(url: str) -> int:
-    return urlsplit(url).port or 0
