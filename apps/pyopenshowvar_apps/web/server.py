@@ -42,7 +42,7 @@ from starlette.middleware import Middleware
 from starlette.middleware.trustedhost import TrustedHostMiddleware
 from starlette.requests import Request
 from starlette.responses import Response
-from starlette.routing import Mount, Route, WebSocketRoute
+from starlette.routing import BaseRoute, Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from starlette.websockets import WebSocket, WebSocketDisconnect, WebSocketDisconnected
@@ -65,7 +65,15 @@ from .policy import (
 )
 from .robotlink import MAX_WATCH, RobotLink
 
-__all__ = ["MAX_MESSAGE", "MAX_PAGES", "WebConfig", "build_page", "create_app"]
+__all__ = [
+    "MAX_MESSAGE",
+    "MAX_PAGES",
+    "WebConfig",
+    "build_page",
+    "close_quietly",
+    "create_app",
+    "guarded_app",
+]
 
 log = logging.getLogger(__name__)
 
@@ -151,6 +159,15 @@ def hello(config: WebConfig) -> dict[str, Any]:
     }
 
 
+def guarded_app(routes: Sequence[BaseRoute], token: str | None) -> Starlette:
+    """A Starlette app of ``routes`` with the pages' rules: :data:`HEADERS` on every response
+    and, without a token (on loopback), only loopback names in the Host header."""
+    middleware = [Middleware(_SecurityHeaders)]
+    if token is None:
+        middleware.append(Middleware(TrustedHostMiddleware, allowed_hosts=list(LOOPBACK_HOSTS)))
+    return Starlette(routes=routes, middleware=middleware)
+
+
 def create_app(link: RobotLink, jog: JogController, config: WebConfig) -> Starlette:
     """The Starlette application (the caller runs it with uvicorn and runs ``link``/``jog``)."""
     pad = _PadServer(link, jog, config)
@@ -159,10 +176,7 @@ def create_app(link: RobotLink, jog: JogController, config: WebConfig) -> Starle
         Mount("/static", StaticFiles(directory=STATIC), name="static"),
         WebSocketRoute("/ws", pad.stream),
     ]
-    middleware = [Middleware(_SecurityHeaders)]
-    if config.token is None:
-        middleware.append(Middleware(TrustedHostMiddleware, allowed_hosts=list(LOOPBACK_HOSTS)))
-    app = Starlette(routes=routes, middleware=middleware)
+    app = guarded_app(routes, config.token)
     app.state.pages = pad.pages  # the connected pages (tests and the abuse suite count them)
     return app
 
