@@ -16,7 +16,7 @@ import statistics
 import subprocess
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -145,6 +145,24 @@ def write_json(path: Path | None, area: str, rows: Sequence[Row], extra: dict[st
     path.write_text(
         json.dumps({"area": area, "rows": [r.as_dict() for r in rows], "extra": extra}, indent=1)
     )
+
+
+def repeat_main(
+    doc: str | None,
+    title: str,
+    area: str,
+    run: Callable[[bool, int], tuple[list[Row], dict[str, Any]]],
+    *,
+    repeat: int,
+) -> None:
+    """The whole ``main`` of a benchmark that is one ``run(quick, repeat) -> (rows, extra)``:
+    the shared options (``--repeat`` defaults to ``repeat``, 1 with ``--quick``), the table
+    (``title`` may name ``{repeat}``) and the JSON for ``run_all.py``."""
+    args = base_parser(doc).parse_args()
+    n = args.repeat or (1 if args.quick else repeat)
+    rows, extra = run(args.quick, n)
+    print_rows(title.format(repeat=n), rows)
+    write_json(args.json, area, rows, extra)
 
 
 # --------------------------------------------------------------------------- machine

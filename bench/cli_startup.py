@@ -19,7 +19,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _common import EmuProcess, Row, base_parser, median, print_rows, write_json
+from _common import EmuProcess, Row, median, repeat_main
 
 KVP = str(Path(sys.executable).with_name("kvp"))
 PEER = (
@@ -72,12 +72,7 @@ def run(quick: bool, repeat: int) -> tuple[list[Row], dict[str, Any]]:
 
 
 def main() -> None:
-    ap = base_parser(__doc__)
-    args = ap.parse_args()
-    repeat = args.repeat or (1 if args.quick else 15)
-    rows, extra = run(args.quick, repeat)
-    print_rows("CLI start-up", rows)
-    write_json(args.json, "CLI", rows, extra)
+    repeat_main(__doc__, "CLI start-up", "CLI", run, repeat=15)
 
 
 if __name__ == "__main__":

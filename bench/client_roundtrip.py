@@ -34,7 +34,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _common import EmuProcess, Row, base_parser, median, print_rows, write_json
+from _common import EmuProcess, Row, median, repeat_main
 
 from kukavarproxy_emu.latency import PROFILES, LatencyProfile
 from pyopenshowvar import Client, parse_value, sync
@@ -197,8 +197,13 @@ def service_limit(profile: LatencyProfile) -> tuple[float, float, float]:
 
 
 def run(quick: bool, repeat: int) -> tuple[list[Row], dict[str, Any]]:
+    rows = _latency_none(quick, repeat) + _kvp_profile(quick, repeat)
+    return rows, {"seeds": [SEED + i for i in range(repeat)]}
+
+
+def _latency_none(quick: bool, repeat: int) -> list[Row]:
+    """Figures 1 and 2: serial round trips and ``read_many``, one emulator, no latency."""
     rows: list[Row] = []
-    extra: dict[str, Any] = {}
     n_serial = 300 if quick else 3000
     many_calls = 3 if quick else 40
     has_peer = py_openshowvar is not None
@@ -266,7 +271,12 @@ def run(quick: bool, repeat: int) -> tuple[list[Row], dict[str, Any]]:
             + (f", loop {1e3 / median(peer_many):.2f} ms" if peer_many else ""),
         )
     )
+    return rows
 
+
+def _kvp_profile(quick: bool, repeat: int) -> list[Row]:
+    """Figures 3 and 4: torques and the control cycle, an emulator per run (seeded ``kvp``)."""
+    rows: list[Row] = []
     profile = PROFILES["kvp"]
     t_read, t_write, limit = service_limit(profile)
     torque_calls = 8 if quick else 120
@@ -326,17 +336,11 @@ def run(quick: bool, repeat: int) -> tuple[list[Row], dict[str, Any]]:
             ),
         )
     )
-    extra["seeds"] = [SEED + i for i in range(repeat)]
-    return rows, extra
+    return rows
 
 
 def main() -> None:
-    ap = base_parser(__doc__)
-    args = ap.parse_args()
-    repeat = args.repeat or (1 if args.quick else 5)
-    rows, extra = run(args.quick, repeat)
-    print_rows(f"Client (median of {repeat} runs)", rows)
-    write_json(args.json, "client", rows, extra)
+    repeat_main(__doc__, "Client (median of {repeat} runs)", "client", run, repeat=5)
 
 
 if __name__ == "__main__":

@@ -19,7 +19,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _common import Row, base_parser, median, print_rows, write_json
+from _common import Row, median, repeat_main
 
 from pyopenshowvar.krl import format_value, parse_value
 from pyopenshowvar.protocol import Mode, Reply, decode_reply, encode_read, encode_reply
@@ -100,12 +100,7 @@ def run(quick: bool, repeat: int) -> tuple[list[Row], dict[str, Any]]:
 
 
 def main() -> None:
-    ap = base_parser(__doc__)
-    args = ap.parse_args()
-    repeat = args.repeat or (1 if args.quick else 5)
-    rows, extra = run(args.quick, repeat)
-    print_rows(f"Codec (median of {repeat} runs)", rows)
-    write_json(args.json, "codec", rows, extra)
+    repeat_main(__doc__, "Codec (median of {repeat} runs)", "codec", run, repeat=5)
 
 
 if __name__ == "__main__":

@@ -12,7 +12,6 @@ worse attenuation, so the machine's load average is printed with the figures.
 
 from __future__ import annotations
 
-import asyncio
 import math
 import os
 import sys
@@ -22,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _common import Row, base_parser, machine_info, print_rows, write_json
 from pyopenshowvar_apps.heave.experiment import HeavePlan
-from pyopenshowvar_apps.heave.runner import EmbeddedRig, run_session
+from pyopenshowvar_apps.heave.runner import EmbeddedRig
 from pyopenshowvar_apps.heave.sweep import run_sweep
 
 
@@ -37,17 +36,7 @@ def main() -> None:
     else:
         plan = HeavePlan.thesis(19, periods=2)
     with EmbeddedRig(seed=19) as rig:
-        res = asyncio.run(
-            run_session(
-                plan,
-                kvp_address=rig.kvp_address,
-                modbus_address=rig.modbus_address,
-                accel_port=rig.accel_port,
-                truth=rig.truth,
-                out_dir=args.out,
-                plots=args.out is not None,
-            )
-        )
+        res = rig.run(plan, out_dir=args.out, plots=args.out is not None)
     m = res.metrics
     rows = [
         Row(f"world {a.upper()} RMS attenuation", m[f"attenuation_rms_{a}"], "%",

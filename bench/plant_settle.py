@@ -277,14 +277,12 @@ def main() -> None:
     masses = MASSES[-1:] if args.quick else MASSES
     rng = np.random.default_rng(2026)
     rows: list[Row] = []
-    cpu_all: list[float] = []
     for mass in masses:
         cases = [
             settle_case(random_pose(rng), random_load(rng, mass), seed=i) for i in range(poses)
         ]
         settled = sum(c["settled"] for c in cases)
         cpu = [c["cpu"] for c in cases]
-        cpu_all += cpu
         label = f"{mass:g} kg"
         rows += [
             Row(f"{label}: poses settled within 2 s (of {poses})", settled, "poses"),

@@ -36,7 +36,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _common import EmuProcess, Row, base_parser, median, print_rows, write_json
+from _common import EmuProcess, Row, median, repeat_main
 
 from pyopenshowvar import Snapshot, parse_value, sync
 from pyopenshowvar.kinematics import KR6R900SIXX, forward
@@ -213,12 +213,7 @@ def run(quick: bool, repeat: int) -> tuple[list[Row], dict[str, Any]]:
 
 
 def main() -> None:
-    ap = base_parser(__doc__)
-    args = ap.parse_args()
-    repeat = args.repeat or (1 if args.quick else 3)
-    rows, extra = run(args.quick, repeat)
-    print_rows(f"Snapshots (median of {repeat} runs)", rows)
-    write_json(args.json, "snapshot", rows, extra)
+    repeat_main(__doc__, "Snapshots (median of {repeat} runs)", "snapshot", run, repeat=3)
 
 
 if __name__ == "__main__":

@@ -34,7 +34,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _common import EmuProcess, Row, base_parser, median, print_rows, write_json
+from _common import EmuProcess, Row, median, repeat_main
 
 from pyopenshowvar import sync
 from pyopenshowvar.blocking import BlockingConnection
@@ -296,12 +296,9 @@ def run(quick: bool, repeat: int) -> tuple[list[Row], dict[str, Any]]:
 
 
 def main() -> None:
-    ap = base_parser(__doc__)
-    args = ap.parse_args()
-    repeat = args.repeat or (1 if args.quick else 5)
-    rows, extra = run(args.quick, repeat)
-    print_rows(f"Serial read cost (CPU: best of {repeat} runs)", rows)
-    write_json(args.json, "sync_read_cost", rows, extra)
+    repeat_main(
+        __doc__, "Serial read cost (CPU: best of {repeat} runs)", "sync_read_cost", run, repeat=5
+    )
 
 
 if __name__ == "__main__":

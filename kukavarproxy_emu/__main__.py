@@ -22,14 +22,14 @@ import socket
 import sys
 import threading
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, fields
 from pathlib import Path
+from typing import Any
 
 from pyopenshowvar.extras import MissingExtraError
 
 from .cell import Cell, cell_configs
 from .config import (
-    DEFAULT_PORT,
-    DEFAULT_UDP_PORT,
     IDLE_RESETS,
     KNOWN_QUIRKS,
     PROXIES,
@@ -49,167 +49,214 @@ log = logging.getLogger("kukavarproxy_emu")
 STOP_DEADLINE = 0.9
 
 
+def _same(value: Any) -> Any:
+    return value
+
+
+def _split_quirks(items: list[str]) -> frozenset[str]:
+    return frozenset(q.strip() for item in items for q in item.split(",") if q.strip())
+
+
+@dataclass(frozen=True)
+class _Option:
+    """One option that sets one :class:`EmulatorConfig` field (its ``dest`` is the field's
+    name; its default, for a plain option, the field's default)."""
+
+    flag: str
+    field: str
+    help: str | None = None
+    type: Callable[[str], Any] | None = None
+    choices: Sequence[str] | None = None
+    metavar: str | None = None
+    #: "store"; "append" (repeatable: a list, made a tuple by ``convert``); "store_true" /
+    #: "store_false" (a switch); "either" (``--flag`` / ``--no-flag``, unset: the default)
+    action: str = "store"
+    #: what the parsed value becomes in the config
+    convert: Callable[[Any], Any] = _same
+
+
+#: Every option that sets a config field, by help group, in the order ``--help`` lists them:
+#: a new :class:`EmulatorConfig` field that the command line sets is one line here.
+_OPTIONS: dict[str, tuple[_Option, ...]] = {
+    "network": (
+        _Option("--host", "host", "address to bind (default 127.0.0.1)"),
+        _Option("--port", "port", "TCP port (default 7000, 0 = ephemeral)", int),
+        _Option(
+            "--max-clients",
+            "max_clients",
+            "0 = unlimited (default 10; 64 with --proxy c3bridge)",
+            int,
+        ),
+        _Option(
+            "--idle-timeout",
+            "idle_timeout",
+            "seconds, 0 = never (default 30; never with --proxy c3bridge)",
+            float,
+        ),
+        _Option(
+            "--idle-reset",
+            "idle_reset",
+            "what resets the idle timer: any received bytes, as KVP (default), or only whole"
+            " requests",
+            choices=IDLE_RESETS,
+        ),
+        _Option("--udp-port", "udp_port", "discovery port", int),
+        _Option(
+            "--udp-reply-port",
+            "udp_reply_port",
+            "port discovery answers go to (default 7000, 0 = the sender's port)",
+            int,
+        ),
+        _Option("--discovery", "discovery", action="either"),
+    ),
+    "behaviour": (
+        _Option(
+            "--config",
+            "config_files",
+            "$CONFIG.DAT-style file whose globals are added to the defaults (repeatable)",
+            Path,
+            metavar="FILE",
+            action="append",
+            convert=tuple,
+        ),
+        _Option(
+            "--latency",
+            "latency",
+            f"none | {' | '.join(PROFILES)} | fixed:SECONDS (default none)",
+            metavar="PROFILE",
+        ),
+        _Option("--seed", "seed", "seed of the latency sampler", int),
+        _Option(
+            "--proxy",
+            "proxy",
+            "kvp (default): KUKAVARPROXY 9.0; c3bridge: C3 Bridge 1.4, its extended messages"
+            " (read many, program control, files, ...) on the same robot, see docs/c3bridge.md",
+            choices=PROXIES,
+        ),
+        _Option(
+            "--strict", "strict", "C3 Bridge style failures (tail 00 00 00)", action="store_true"
+        ),
+        _Option(
+            "--wire",
+            "wire",
+            "robust (default): reassemble requests, close on garbage; kvp9: parse every"
+            " 2048-byte read on its own, byte for byte like KUKAVARPROXY 9.0",
+            choices=WIRES,
+        ),
+        _Option(
+            "--quirks",
+            "quirks",
+            f"reproduce old-proxy bugs: {', '.join(sorted(KNOWN_QUIRKS))}",
+            metavar="QUIRK[,QUIRK]",
+            action="append",
+            convert=_split_quirks,
+        ),
+        _Option(
+            "--fault",
+            "faults",
+            "inject a fault, KIND[:VALUE][@NTH][,conn=C][,count=K][,pause=S] (repeatable)",
+            metavar="SPEC",
+            action="append",
+            convert=lambda specs: tuple(Fault.parse(spec) for spec in specs),
+        ),
+    ),
+    "simulated robot": (
+        _Option(
+            "--robot",
+            "arm",
+            "which KUKA six-axis arm: a catalogue name (kvp arms list: kr6_r900_sixx,"
+            " kr10_r1100_2, kr16_r2010_2, kr210_r2700_2, kr560_r3100_2) or an arm file (.toml,"
+            " .urdf); default the KR 6 R900 sixx. Its $MODEL_NAME[], limits, speeds and plant"
+            " follow it; arms a KRC does not drive over KUKAVARPROXY are refused",
+            metavar="NAME|FILE",
+        ),
+        _Option(
+            "--program",
+            "program",
+            f"robot program: a KRL .src file (its .dat beside it is loaded) or a shipped one,"
+            f" {' | '.join(ROBOT_PROGRAMS)} (default follow: LOOP PTP MYAXIS C_PTP; none with"
+            " --proxy c3bridge)",
+            metavar="NAME|PROG.src",
+        ),
+        _Option(
+            "--sps",
+            "sps",
+            "submit program run beside it (default: the shipped sps.sub, OUTPUT_VARS to $OUT;"
+            " none = no SPS)",
+            metavar="SPS.SUB",
+        ),
+        _Option("--speed", "speed", "simulated time runs F times faster (default 1)", float),
+        _Option("--ipo", "ipo", "interpolation cycle, seconds (default 0.012)", float),
+        _Option(
+            "--plant",
+            "plant",
+            "dynamic: rigid-body arm, servos, friction, sensor noise (default); ideal: measured"
+            " = set-point, exact statics torques",
+            choices=PLANTS,
+        ),
+        _Option(
+            "--noise",
+            "noise",
+            "encoder noise on the measured axes, deg (default: dynamic 2e-5, ideal 0)",
+            float,
+            metavar="DEG",
+        ),
+        _Option(
+            "--torque-noise",
+            "torque_noise",
+            "noise on $TORQUE_AXIS_ACT, Nm (default 0.1 %% of each axis' max torque)",
+            float,
+            metavar="NM",
+        ),
+        _Option(
+            "--calibration-error",
+            "calibration_error",
+            "the physical robot's geometry and masses differ from the nominal model"
+            " (random, realistic amounts drawn with SEED; default off)",
+            int,
+            metavar="SEED",
+        ),
+        _Option(
+            "--obstacle",
+            "obstacles",
+            "a box the TCP can push against: centre and half size (mm, $ROBROOT), stiffness"
+            " N/mm (default 2), damping N*s/mm (0.02), probe radius mm (0); repeatable",
+            metavar="CX,CY,CZ,HX,HY,HZ[,K[,B[,R]]]",
+            action="append",
+            convert=lambda specs: tuple(Obstacle.parse(spec) for spec in specs),
+        ),
+        _Option("--no-robot", "robot", "static variables, no motion", action="store_false"),
+    ),
+}
+
+
+def _add(group: argparse._ArgumentGroup, opt: _Option, default: Any) -> None:
+    if opt.action == "either":  # --flag / --no-flag; neither given: the config's default
+        pair = group.add_mutually_exclusive_group()
+        pair.add_argument(opt.flag, dest=opt.field, action="store_true", default=default)
+        pair.add_argument(f"--no-{opt.flag[2:]}", dest=opt.field, action="store_false")
+        return
+    kwargs: dict[str, Any] = {"dest": opt.field, "action": opt.action, "help": opt.help}
+    if opt.action in ("store", "append"):
+        kwargs.update(type=opt.type, choices=opt.choices, metavar=opt.metavar)
+        kwargs["default"] = [] if opt.action == "append" else default
+    group.add_argument(opt.flag, **kwargs)
+
+
 def build_parser(prog: str = "kukavarproxy-emu") -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog=prog,
         description="KUKAVARPROXY 9.0 (or C3 Bridge 1.4) emulator (TCP 7000 protocol, UDP 6999"
         " discovery).",
     )
-    net = parser.add_argument_group("network")
-    net.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
-    net.add_argument(
-        "--port", type=int, default=DEFAULT_PORT, help="TCP port (default 7000, 0 = ephemeral)"
-    )
-    net.add_argument(
-        "--max-clients",
-        type=int,
-        default=-1,
-        help="0 = unlimited (default 10; 64 with --proxy c3bridge)",
-    )
-    net.add_argument(
-        "--idle-timeout",
-        type=float,
-        default=-1.0,
-        help="seconds, 0 = never (default 30; never with --proxy c3bridge)",
-    )
-    net.add_argument(
-        "--idle-reset",
-        choices=IDLE_RESETS,
-        default="bytes",
-        help="what resets the idle timer: any received bytes, as KVP (default), or only whole"
-        " requests",
-    )
-    net.add_argument("--udp-port", type=int, default=DEFAULT_UDP_PORT, help="discovery port")
-    net.add_argument(
-        "--udp-reply-port",
-        type=int,
-        default=DEFAULT_PORT,
-        help="port discovery answers go to (default 7000, 0 = the sender's port)",
-    )
-    disc = net.add_mutually_exclusive_group()
-    disc.add_argument("--discovery", dest="discovery", action="store_true", default=None)
-    disc.add_argument("--no-discovery", dest="discovery", action="store_false")
-
-    beh = parser.add_argument_group("behaviour")
-    beh.add_argument(
-        "--config",
-        action="append",
-        default=[],
-        metavar="FILE",
-        type=Path,
-        help="$CONFIG.DAT-style file whose globals are added to the defaults (repeatable)",
-    )
-    beh.add_argument(
-        "--latency",
-        default="none",
-        metavar="PROFILE",
-        help=f"none | {' | '.join(PROFILES)} | fixed:SECONDS (default none)",
-    )
-    beh.add_argument("--seed", type=int, default=None, help="seed of the latency sampler")
-    beh.add_argument(
-        "--proxy",
-        default="kvp",
-        choices=PROXIES,
-        help="kvp (default): KUKAVARPROXY 9.0; c3bridge: C3 Bridge 1.4, its extended messages"
-        " (read many, program control, files, ...) on the same robot, see docs/c3bridge.md",
-    )
-    beh.add_argument(
-        "--strict", action="store_true", help="C3 Bridge style failures (tail 00 00 00)"
-    )
-    beh.add_argument(
-        "--wire",
-        default="robust",
-        choices=WIRES,
-        help="robust (default): reassemble requests, close on garbage; kvp9: parse every"
-        " 2048-byte read on its own, byte for byte like KUKAVARPROXY 9.0",
-    )
-    beh.add_argument(
-        "--quirks",
-        action="append",
-        default=[],
-        metavar="QUIRK[,QUIRK]",
-        help=f"reproduce old-proxy bugs: {', '.join(sorted(KNOWN_QUIRKS))}",
-    )
-    beh.add_argument(
-        "--fault",
-        action="append",
-        default=[],
-        metavar="SPEC",
-        help="inject a fault, KIND[:VALUE][@NTH][,conn=C][,count=K][,pause=S] (repeatable)",
-    )
-    rob = parser.add_argument_group("simulated robot")
-    rob.add_argument(
-        "--robot",
-        dest="arm",
-        default="",
-        metavar="NAME|FILE",
-        help="which KUKA six-axis arm: a catalogue name (kvp arms list: kr6_r900_sixx,"
-        " kr10_r1100_2, kr16_r2010_2, kr210_r2700_2, kr560_r3100_2) or an arm file (.toml,"
-        " .urdf); default the KR 6 R900 sixx. Its $MODEL_NAME[], limits, speeds and plant"
-        " follow it; arms a KRC does not drive over KUKAVARPROXY are refused",
-    )
-    rob.add_argument(
-        "--program",
-        default="",
-        metavar="NAME|PROG.src",
-        help=f"robot program: a KRL .src file (its .dat beside it is loaded) or a shipped one,"
-        f" {' | '.join(ROBOT_PROGRAMS)} (default follow: LOOP PTP MYAXIS C_PTP; none with"
-        " --proxy c3bridge)",
-    )
-    rob.add_argument(
-        "--sps",
-        default="sps",
-        metavar="SPS.SUB",
-        help="submit program run beside it (default: the shipped sps.sub, OUTPUT_VARS to $OUT;"
-        " none = no SPS)",
-    )
-    rob.add_argument(
-        "--speed", type=float, default=1.0, help="simulated time runs F times faster (default 1)"
-    )
-    rob.add_argument(
-        "--ipo", type=float, default=0.012, help="interpolation cycle, seconds (default 0.012)"
-    )
-    rob.add_argument(
-        "--plant",
-        choices=PLANTS,
-        default="dynamic",
-        help="dynamic: rigid-body arm, servos, friction, sensor noise (default); ideal: measured"
-        " = set-point, exact statics torques",
-    )
-    rob.add_argument(
-        "--noise",
-        type=float,
-        default=None,
-        metavar="DEG",
-        help="encoder noise on the measured axes, deg (default: dynamic 2e-5, ideal 0)",
-    )
-    rob.add_argument(
-        "--torque-noise",
-        type=float,
-        default=None,
-        metavar="NM",
-        help="noise on $TORQUE_AXIS_ACT, Nm (default 0.1 %% of each axis' max torque)",
-    )
-    rob.add_argument(
-        "--calibration-error",
-        type=int,
-        default=None,
-        metavar="SEED",
-        help="the physical robot's geometry and masses differ from the nominal model"
-        " (random, realistic amounts drawn with SEED; default off)",
-    )
-    rob.add_argument(
-        "--obstacle",
-        action="append",
-        default=[],
-        metavar="CX,CY,CZ,HX,HY,HZ[,K[,B[,R]]]",
-        help="a box the TCP can push against: centre and half size (mm, $ROBROOT), stiffness"
-        " N/mm (default 2), damping N*s/mm (0.02), probe radius mm (0); repeatable",
-    )
-    rob.add_argument(
-        "--no-robot", dest="robot", action="store_false", help="static variables, no motion"
-    )
-    rob.add_argument(
+    defaults = {f.name: f.default for f in fields(EmulatorConfig)}
+    groups: dict[str, argparse._ArgumentGroup] = {}
+    for title, options in _OPTIONS.items():
+        groups[title] = group = parser.add_argument_group(title)
+        for opt in options:
+            _add(group, opt, defaults[opt.field])
+    # Options of the process, not of one emulator's config:
+    groups["simulated robot"].add_argument(
         "--robots",
         type=int,
         default=1,
@@ -227,36 +274,12 @@ def build_parser(prog: str = "kukavarproxy-emu") -> argparse.ArgumentParser:
 
 
 def config_from_args(args: argparse.Namespace) -> EmulatorConfig:
-    quirks = frozenset(q.strip() for item in args.quirks for q in item.split(",") if q.strip())
-    return EmulatorConfig(
-        host=args.host,
-        port=args.port,
-        config_files=tuple(args.config),
-        latency=args.latency,
-        max_clients=args.max_clients,
-        idle_timeout=args.idle_timeout,
-        idle_reset=args.idle_reset,
-        seed=args.seed,
-        strict=args.strict,
-        quirks=quirks,
-        wire=args.wire,
-        proxy=args.proxy,
-        udp_port=args.udp_port,
-        udp_reply_port=args.udp_reply_port,
-        discovery=args.discovery,
-        faults=tuple(Fault.parse(spec) for spec in args.fault),
-        robot=args.robot,
-        arm=args.arm,
-        program=args.program,
-        sps=args.sps,
-        speed=args.speed,
-        ipo=args.ipo,
-        noise=args.noise,
-        plant=args.plant,
-        torque_noise=args.torque_noise,
-        calibration_error=args.calibration_error,
-        obstacles=tuple(Obstacle.parse(spec) for spec in args.obstacle),
-    )
+    values = {
+        opt.field: opt.convert(getattr(args, opt.field))
+        for options in _OPTIONS.values()
+        for opt in options
+    }
+    return EmulatorConfig(**values)
 
 
 async def serve(config: EmulatorConfig, robots: int = 1) -> None:

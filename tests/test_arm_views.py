@@ -14,7 +14,7 @@ import pytest
 from pyopenshowvar_apps.armpick import choose_arm, given_arm
 from pyopenshowvar_apps.monitor.state import RobotState
 from pyopenshowvar_apps.web.jog import JogController
-from pyopenshowvar_apps.web.link import RobotLink
+from pyopenshowvar_apps.web.robotlink import RobotLink
 
 from pyopenshowvar import Client
 from pyopenshowvar.kinematics import KR6R900SIXX

@@ -11,6 +11,7 @@ from __future__ import annotations
 import datetime as dt
 
 import pytest
+from hexwire import H, W, payload_of
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -72,21 +73,7 @@ from pyopenshowvar.c3.replies import (
 )
 from pyopenshowvar.c3.server import ServerInfo, identify, parse_version
 from pyopenshowvar.c3.wire import PayloadError, Reader, Writer, utf16_units
-from pyopenshowvar.protocol import decode_reply, decode_request, encode_read, encode_write
-
-
-def H(text: str) -> bytes:
-    return bytes.fromhex(text)
-
-
-def W(text: str) -> str:
-    """UTF-16LE bytes of ``text`` as hex (the spec's WSTRING)."""
-    return text.encode("utf-16-le").hex()
-
-
-def payload_of(frame: bytes) -> bytes:
-    return decode_request(frame).value or b""
-
+from pyopenshowvar.protocol import decode_reply, encode_read, encode_write
 
 # --------------------------------------------------------------------------- spec samples
 

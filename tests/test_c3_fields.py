@@ -10,6 +10,7 @@ from __future__ import annotations
 import datetime as dt
 
 import pytest
+from hexwire import H
 
 from pyopenshowvar.c3.replies import (
     BenchmarkReply,
@@ -24,10 +25,6 @@ from pyopenshowvar.c3.replies import (
 )
 from pyopenshowvar.c3.wire import MAX_PAYLOAD, PayloadError, Reader, Writer, utf16_units
 from pyopenshowvar.protocol import Reply, decode_reply
-
-
-def H(text: str) -> bytes:
-    return bytes.fromhex(text.replace(" ", ""))
 
 
 # --- Writer ---------------------------------------------------------------------------------------

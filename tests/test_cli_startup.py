@@ -30,7 +30,7 @@ HEAVY = (
     "pyopenshowvar.snapshot_layout",
     "pyopenshowvar_apps.demo",
     "pyopenshowvar_apps.discover",
-    "pyopenshowvar_apps.live",
+    "pyopenshowvar_apps.watchrecord",
     "pyopenshowvar_apps.bench",
     "pyopenshowvar_apps.sessions",
     "pyopenshowvar_apps.heave.cli",

@@ -25,7 +25,7 @@ from asyncua.crypto.truststore import TrustStore
 from cryptography import x509
 from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
-from pyopenshowvar_apps.gateway.cell import UserEntry
+from pyopenshowvar_apps.gateway.passwords import UserEntry
 from pyopenshowvar_apps.gateway.security import (
     VERDICT,
     LoginGuard,
@@ -646,9 +646,9 @@ def test_a_hash_has_a_16_byte_salt_and_a_bad_one_is_named_exactly() -> None:
 
 
 def test_unpadded_base64_round_trips_whatever_its_last_character() -> None:
-    from pyopenshowvar_apps.gateway.security import _b64, _unb64
+    from pyopenshowvar_apps.gateway.passwords import b64, unb64
 
     for data in (b"\x00\x00\x17", b"\x00\x00\x17\x00", b"\xff" * 16, b"", b"a"):
-        text = _b64(data)
-        assert "=" not in text and _unb64(text) == data, (data, text)
-    assert _b64(b"\x00\x00\x17") == "AAAX"
+        text = b64(data)
+        assert "=" not in text and unb64(text) == data, (data, text)
+    assert b64(b"\x00\x00\x17") == "AAAX"

@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pyopenshowvar_apps.gateway.cell import CellError, load_cell, parse_cell
 from pyopenshowvar_apps.gateway.mapping import poll_values, task_state
-from pyopenshowvar_apps.gateway.poller import _next_slot
+from pyopenshowvar_apps.gateway.schedule import next_slot
 from pyopenshowvar_apps.gateway.security import check_hash_format, hash_password, verify_password
 
 from pyopenshowvar import KrlEnum, parse_value
@@ -194,10 +194,10 @@ def test_poll_slots_are_on_the_grid_and_one_period_apart(
 ) -> None:
     """The poll schedule: the next slot is strictly later, within one period, on the robot's
     phase of the grid; from a slot the next is exactly one period on (never a double poll)."""
-    slot = _next_slot(now, period, phase)
+    slot = next_slot(now, period, phase)
     assert now < slot <= now + period * (1 + 1e-6)
     assert (slot / period - phase) == pytest.approx(round(slot / period - phase), abs=1e-6)
-    assert _next_slot(slot, period, phase) - slot == pytest.approx(period, rel=1e-6)
+    assert next_slot(slot, period, phase) - slot == pytest.approx(period, rel=1e-6)
 
 
 def test_writable_names_match_whole_and_case_insensitively() -> None:

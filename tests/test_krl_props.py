@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import struct
 import time
 from typing import Any
 
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from test_krl import f32
 
 from pyopenshowvar.errors import KrlValueError
 from pyopenshowvar.krl import (
@@ -23,11 +23,6 @@ from pyopenshowvar.krl import (
     parse_value,
 )
 from pyopenshowvar.krl.parse import parse_number_list, parse_number_struct
-
-
-def f32(x: float) -> float:
-    return float(struct.unpack("<f", struct.pack("<f", x))[0])
-
 
 identifiers = st.from_regex(r"[A-Za-z_$][A-Za-z0-9_$]{0,10}", fullmatch=True)
 # a generic struct's type name must not be a declared type, or its members would be checked

@@ -26,7 +26,8 @@ from textual import events
 from textual.widgets import DataTable, Input, TabbedContent
 
 
-async def until(pilot: Any, cond: Callable[[], bool], timeout: float = 5.0) -> None:
+async def until(pilot: Any, cond: Callable[[], bool], timeout: float = 8.0) -> None:
+    """Wait until ``cond()`` holds, letting the app run (shared with test_monitor_layout)."""
     loop = asyncio.get_running_loop()
     end = loop.time() + timeout
     while not cond():

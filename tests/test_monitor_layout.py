@@ -3,9 +3,7 @@ layout fills 80×24 and 120×40, Ctrl-C quits, writes are checked (Textual pilot
 
 from __future__ import annotations
 
-import asyncio
 import io
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -17,18 +15,10 @@ from pyopenshowvar_apps.monitor.app import MonitorApp
 from pyopenshowvar_apps.monitor.dialogs import InputDialog
 from pyopenshowvar_apps.monitor.watchlist import WatchList
 from rich.console import Console
+from test_monitor import until
 from textual.widgets import DataTable, Input, TabbedContent
 
 WATCH = ["MYAXIS", "$OV_PRO", "$POS_ACT", "MYINT"]
-
-
-async def until(pilot: Any, cond: Callable[[], bool], timeout: float = 8.0) -> None:
-    loop = asyncio.get_running_loop()
-    end = loop.time() + timeout
-    while not cond():
-        if loop.time() > end:
-            raise AssertionError("condition not met in time")
-        await pilot.pause(0.05)
 
 
 def make_app(port: int, tmp_path: Path) -> MonitorApp:

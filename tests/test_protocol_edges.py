@@ -10,6 +10,7 @@ from __future__ import annotations
 import re
 
 import pytest
+from hexwire import H
 
 from pyopenshowvar.errors import ProtocolError
 from pyopenshowvar.protocol import (
@@ -30,10 +31,6 @@ from pyopenshowvar.protocol import (
     encode_write,
     encode_write_array,
 )
-
-
-def H(text: str) -> bytes:
-    return bytes.fromhex(text.replace(" ", ""))
 
 
 def raises(message: str) -> pytest.RaisesContext[ProtocolError]:

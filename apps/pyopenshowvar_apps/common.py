@@ -130,15 +130,6 @@ def robot_choice(value: str) -> str:
     return value
 
 
-def robot_arm() -> Any:
-    """The :class:`~pyopenshowvar.arms.Arm` of ``--robot``, None when not given."""
-    if not Opts.robot:
-        return None
-    from pyopenshowvar.arms import load_arm
-
-    return load_arm(Opts.robot)
-
-
 def calibration_choice(value: str | None) -> str | None:
     """Validate a ``--calibration-error`` option (typer callback): a seed (an integer >= 0) or
     ``off``; None (not given) passes through. :func:`calibration_seed` converts it."""

@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 import pytest
+from hexwire import H, W
 
 from kukavarproxy_emu import Emulator
 from kukavarproxy_emu.c3 import HANDLED
@@ -25,14 +26,6 @@ from pyopenshowvar.c3.files import (
 from pyopenshowvar.c3.messages import Motion, ProgramControl, ReadMultiple, ReadVariable
 from pyopenshowvar.c3.replies import FeatureMap, Multiple, Outcome
 from pyopenshowvar.protocol import decode_reply, encode_read
-
-
-def H(text: str) -> bytes:
-    return bytes.fromhex(text)
-
-
-def W(text: str) -> str:
-    return text.encode("utf-16-le").hex()
 
 
 @pytest.fixture

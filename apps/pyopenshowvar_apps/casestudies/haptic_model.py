@@ -99,10 +99,6 @@ class CycleMotion:
         return np.asarray((self.qd_end - self.qd_start) / self.dt)
 
     @property
-    def q_start(self) -> FloatArray:
-        return np.asarray(self.q - self.mean_speed * self.dt)
-
-    @property
     def q_mid(self) -> FloatArray:
         return np.asarray(self.q - self.mean_speed * self.dt / 2.0)
 

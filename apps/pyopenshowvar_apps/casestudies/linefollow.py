@@ -41,6 +41,7 @@ from pyopenshowvar.krl import E6Pos
 from pyopenshowvar_apps.casestudies import linefollow_vision as vision
 from pyopenshowvar_apps.casestudies.common import CaseResult, output_dir
 from pyopenshowvar_apps.casestudies.linefollow_report import figures, write_outputs
+from pyopenshowvar_apps.casestudies.linefollow_vision import Detection
 
 __all__ = [
     "DEFAULT_TABLE_POSE",
@@ -107,18 +108,6 @@ def parked_store(pose: Sequence[float], model: RobotModel = KR6R900SIXX) -> Any:
     axes = "{E6AXIS: " + ", ".join(f"A{i} {v:.6f}" for i, v in enumerate(q, 1)) + ext
     pos = "{E6POS: " + ", ".join(f"{k} {v:.6f}" for k, v in zip("XYZABC", p, strict=True))
     return VariableStore(overrides={"$AXIS_ACT": axes, "$POS_ACT": pos + f", S {s}, T {t}" + ext})
-
-
-@dataclass
-class Detection:
-    """The detected line: region, ridge pixels, centreline (px, sub-pixel) and its ends."""
-
-    gray: np.ndarray
-    mask: np.ndarray
-    pixels: list[tuple[int, int]]
-    path_px: np.ndarray
-    start: tuple[int, int]
-    end: tuple[int, int]
 
 
 def detect_path(

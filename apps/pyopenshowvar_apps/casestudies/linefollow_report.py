@@ -16,7 +16,7 @@ import numpy as np
 from pyopenshowvar_apps.casestudies.common import CaseResult, new_figure, save_figure, write_csv
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
-    from pyopenshowvar_apps.casestudies.linefollow import Detection
+    from pyopenshowvar_apps.casestudies.linefollow_vision import Detection
 
 __all__ = ["figures", "write_outputs"]
 

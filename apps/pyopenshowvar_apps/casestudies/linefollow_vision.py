@@ -19,18 +19,21 @@ the field's library routine:
   and trimmed at both ends by the line's half width: a marker of radius r leaves a round cap
   that reaches r beyond the end of the stroke's centre, so the tips are not the ends.
 
-:func:`resample` and :func:`polyline_distance` are the geometry the case study measures with.
+:class:`Detection` holds what the steps found for one image; :func:`resample` and
+:func:`polyline_distance` are the geometry the case study measures with.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
 
 __all__ = [
+    "Detection",
     "NoPathError",
     "centreline",
     "distance_map",
@@ -46,6 +49,18 @@ __all__ = [
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 Pixel = tuple[int, int]  # (row, col)
+
+
+@dataclass
+class Detection:
+    """The detected line: region, ridge pixels, centreline (px, sub-pixel) and its ends."""
+
+    gray: np.ndarray
+    mask: np.ndarray
+    pixels: list[tuple[int, int]]
+    path_px: np.ndarray
+    start: tuple[int, int]
+    end: tuple[int, int]
 
 
 class NoPathError(ValueError):

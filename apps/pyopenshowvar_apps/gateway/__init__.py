@@ -6,7 +6,8 @@ OPC Foundation's own NodeSets. See docs/gateway.md.
 
 Modules: :mod:`.cell` (the cell file), :mod:`.model` (NodeSets and instantiation),
 :mod:`.robotics` (the per-robot node tree), :mod:`.mapping` (KRL values to OPC UA values),
-:mod:`.poller` (one polling task per robot), :mod:`.live` (node values served lazily),
-:mod:`.writes` (the WriteVariable method),
-:mod:`.security` (users, certificate) and :mod:`.server` (the gateway itself).
+:mod:`.poller` (one polling task per robot) and :mod:`.schedule` (when it polls),
+:mod:`.livenodes` (node values served lazily), :mod:`.writes` (the WriteVariable method),
+:mod:`.passwords` (password hashes), :mod:`.security` (login rules, certificate) and
+:mod:`.server` (the gateway itself).
 """

@@ -22,7 +22,6 @@ never a silently ignored option. Relative paths are relative to the cell file.
 
 from __future__ import annotations
 
-import ipaddress
 import re
 import tomllib
 from collections.abc import Mapping
@@ -31,9 +30,11 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
 
+from pyopenshowvar_apps.hosts import is_loopback
 from pyopenshowvar_apps.names import is_motion_variable
 
 from .budget import MAX_VALUE_CHARS
+from .passwords import UserEntry, check_hash_format
 
 __all__ = [
     "CellConfig",
@@ -42,7 +43,6 @@ __all__ = [
     "SecurityConfig",
     "SnapshotGroup",
     "UserEntry",
-    "is_loopback",
     "load_cell",
     "parse_cell",
 ]
@@ -60,12 +60,6 @@ MAX_ROBOTS = 200
 
 class CellError(ValueError):
     """The cell file is not valid; the message names the file and the offending key."""
-
-
-@dataclass(frozen=True)
-class UserEntry:
-    name: str
-    password_hash: str
 
 
 @dataclass(frozen=True)
@@ -163,15 +157,6 @@ def canonical(name: str) -> str:
     return _INDEX.sub(lambda m: m.group(0).replace(" ", ""), name).upper()
 
 
-def is_loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
-
-
 def load_cell(path: str | Path) -> CellConfig:
     path = Path(path)
     try:
@@ -256,8 +241,6 @@ def _security(raw: Any, host: str, base: Path, where: str) -> SecurityConfig:
         _no_extra(u, {"name", "password_hash"}, what)
         uname = _str(u.get("name"), f"{what}.name")
         phash = _str(u.get("password_hash"), f"{what}.password_hash")
-        from .security import check_hash_format
-
         problem = check_hash_format(phash)
         if problem:
             raise CellError(

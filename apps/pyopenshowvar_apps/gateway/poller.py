@@ -5,8 +5,8 @@ Each poll is ONE :meth:`Client.read_many` of :data:`~.mapping.POLL_VARIABLES` (t
 snapshot groups (a snapshot group is one read of a STRUC the controller fills, fanned out to
 its member variables). Only texts that changed since the last
 poll are parsed (the moving robot's fixed-format texts by the parser's fast paths), and only
-node values that changed are stored (:mod:`.live`: a DataValue is built only for a client that
-reads or subscribes), so a robot at rest costs the event loop almost nothing beyond the KVP
+node values that changed are stored (:mod:`.livenodes`: a DataValue is built only for a client
+that reads or subscribes), so a robot at rest costs the event loop almost nothing beyond the KVP
 round trip. Every value carries the time the reply arrived as its SourceTimestamp. No robot
 can take the event loop from the others (:mod:`.budget`): a value longer than the robot's
 ``max_value_chars`` is not parsed, parsing hands the loop back every couple of milliseconds,
@@ -16,8 +16,9 @@ A robot that drops (connection lost, timeout, refused connection) turns all its 
 Bad (BadNoCommunication, the value null, as OPC 10000-4 §7.7.1 asks) and ``Connected`` FALSE;
 the task retries with a capped backoff and the nodes turn Good with the first poll after it
 reconnects. The poll schedule is absolute (missed periods are skipped, never bunched) and
-shared: every robot polls on a grid of the event loop's clock, in one of a few slots per
-period (its ``phase``), so a cell's polls are spread evenly and a slot's robots wake at once.
+shared: every robot polls on a grid of the event loop's clock (:mod:`.schedule`), in one of a
+few slots per period (its ``phase``), so a cell's polls are spread evenly and a slot's robots
+wake at once.
 """
 
 from __future__ import annotations
@@ -25,7 +26,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import math
 import random
 import re
 from collections.abc import Mapping, Sequence
@@ -40,7 +40,7 @@ from ..armpick import DEFAULT_CHOICE, choose_arm, given_arm
 from . import ua
 from .budget import ValueTooLongError, WorkBudget
 from .cell import RobotConfig, SnapshotGroup, canonical
-from .live import LiveNode, Sink
+from .livenodes import LiveNode, Sink
 from .mapping import (
     IDENTITY_VARIABLES,
     POLL_VARIABLES,
@@ -51,6 +51,7 @@ from .mapping import (
     text_of,
 )
 from .robotics import UNITS, CellNodes, RobotNodes
+from .schedule import next_slot, sleep_until
 
 __all__ = ["RobotPoller"]
 
@@ -83,7 +84,7 @@ class RobotPoller:
         phase: float = 0.0,
     ) -> None:
         self.cfg, self.nodes, self.cell, self.sink = cfg, nodes, cell, sink
-        #: where in each poll period this robot's polls fall, 0 <= phase < 1 (see _next_slot)
+        #: where in each poll period this robot's polls fall, 0 <= phase < 1 (see next_slot)
         self.phase = phase
         #: The arm drawn on the MotionDevice (its model, axis speeds and ranges): ``cfg.arm``,
         #: else the one $MODEL_NAME[] names, chosen at each connection (see _identity).
@@ -191,9 +192,9 @@ class RobotPoller:
                 names, fast = kept, [n for n in kept if n not in SLOW_VARIABLES]
             self.polls += 1
             after = max(due, loop.time(), self.budget.earliest_next(started, period))
-            due = _next_slot(after, period, self.phase)
+            due = next_slot(after, period, self.phase)
             # stop() cancels the task, so no per-poll waiter on the event
-            await _sleep_until(loop, due)
+            await sleep_until(loop, due)
 
     # ------------------------------------------------------------------ reads
 
@@ -452,36 +453,6 @@ _SCALAR_TYPES = (
     ("stopmess_fn_active", _V.Boolean),
     ("stopmess_fn_enabled", _V.Boolean),
 )
-
-
-def _next_slot(after: float, period: float, phase: float) -> float:
-    """The first time later than ``after`` on the grid ``(k + phase) * period``.
-
-    The grid is the event loop's clock, not the time a robot connected: robots given
-    different phases (the gateway spreads them over a few slots) never poll in one burst, and
-    robots sharing a slot wake at exactly the same instant, in one event-loop iteration. A
-    late poll skips the slots it missed instead of bunching polls.
-    """
-    when = (math.floor(after / period - phase) + 1 + phase) * period
-    if when - after < period * 1e-6:  # ``after`` on the grid itself, and rounded below it
-        when += period
-    return when
-
-
-async def _sleep_until(loop: asyncio.AbstractEventLoop, when: float) -> None:
-    """``asyncio.sleep`` to an absolute time (asyncio.sleep adds the clock read at the call,
-    a few microseconds apart for robots of one slot, which then wake one by one)."""
-    waiter = loop.create_future()
-    handle = loop.call_at(when, _wake, waiter)
-    try:
-        await waiter
-    finally:
-        handle.cancel()
-
-
-def _wake(waiter: asyncio.Future[None]) -> None:
-    if not waiter.done():
-        waiter.set_result(None)
 
 
 # pyopenshowvar.core's advice to a client without auto_reconnect, in both of its forms

@@ -1,7 +1,7 @@
 """Who may talk to the gateway: password hashes, the login rules, the server certificate.
 
 Passwords are never stored: the cell file holds ``pbkdf2-sha256$ITERATIONS$SALT$HASH``
-(``kvp gateway --hash-password`` makes one). :class:`LoginGuard` decides every login: off the
+(``kvp gateway --hash-password`` makes one; :mod:`.passwords` makes and verifies them). :class:`LoginGuard` decides every login: off the
 event loop, at the same cost for every user name, with a limit of failed logins per client
 address and, where configured, only from trusted client certificates. The server certificate
 is generated once (RSA 2048, self-signed, the application URI in its subjectAltName as OPC UA
@@ -12,9 +12,7 @@ clients pin its SHA-256 fingerprint, which the gateway logs at start.
 from __future__ import annotations
 
 import asyncio
-import base64
 import hashlib
-import hmac
 import ipaddress
 import logging
 import os
@@ -30,7 +28,16 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from .cell import UserEntry
+from .passwords import (
+    ITERATIONS,
+    MAX_PASSWORD,
+    SCHEME,
+    UserEntry,
+    b64,
+    check_hash_format,
+    hash_password,
+    verify_password,
+)
 
 __all__ = [
     "VERDICT",
@@ -44,53 +51,6 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
-
-_SCHEME = "pbkdf2-sha256"
-_ITERATIONS = 200_000
-# Bounds keep a hostile cell file from making every login take minutes.
-_MIN_ITERATIONS, _MAX_ITERATIONS = 10_000, 2_000_000
-_MAX_PASSWORD = 1024
-
-
-def hash_password(password: str, *, iterations: int = _ITERATIONS) -> str:
-    salt = secrets.token_bytes(16)
-    digest = hashlib.pbkdf2_hmac("sha256", password.encode(), salt, iterations)
-    return "$".join([_SCHEME, str(iterations), _b64(salt), _b64(digest)])
-
-
-def check_hash_format(text: str) -> str | None:
-    """None when ``text`` is a hash :func:`hash_password` could have made, else why not."""
-    parts = text.split("$")
-    if len(parts) != 4 or parts[0] != _SCHEME:
-        return f"expected {_SCHEME}$ITERATIONS$SALT$HASH"
-    if not parts[1].isdigit() or not _MIN_ITERATIONS <= int(parts[1]) <= _MAX_ITERATIONS:
-        return f"iterations must be within {_MIN_ITERATIONS}..{_MAX_ITERATIONS}"
-    try:
-        salt, digest = _unb64(parts[2]), _unb64(parts[3])
-    except ValueError:
-        return "salt and hash must be base64"
-    if len(salt) < 8 or len(digest) != 32:
-        return "salt of at least 8 bytes and a 32-byte hash expected"
-    return None
-
-
-def verify_password(password: str, stored: str) -> bool:
-    if check_hash_format(stored) is not None or len(password) > _MAX_PASSWORD:
-        return False
-    _, iterations, salt, digest = stored.split("$")
-    mine = hashlib.pbkdf2_hmac("sha256", password.encode(), _unb64(salt), int(iterations))
-    return hmac.compare_digest(mine, _unb64(digest))
-
-
-def _b64(data: bytes) -> str:
-    return base64.b64encode(data).decode().rstrip("=")
-
-
-def _unb64(text: str) -> bytes:
-    try:
-        return base64.b64decode(text + "=" * (-len(text) % 4), validate=True)
-    except (ValueError, TypeError) as exc:
-        raise ValueError("bad base64") from exc
 
 
 @dataclass(frozen=True)
@@ -163,11 +123,11 @@ class LoginGuard:
         self.window = window
         self.trusts = trusts
         self.clock = clock
-        self.cost = max((_iterations(h) for h in self._users.values()), default=_ITERATIONS)
+        self.cost = max((_iterations(h) for h in self._users.values()), default=ITERATIONS)
         # a hash of no password at all (a random digest): checking against it costs what
         # checking a real one does, and nothing matches it
-        random_hash = (_b64(secrets.token_bytes(16)), _b64(secrets.token_bytes(32)))
-        self._dummy = "$".join([_SCHEME, str(self.cost), *random_hash])
+        random_hash = (b64(secrets.token_bytes(16)), b64(secrets.token_bytes(32)))
+        self._dummy = "$".join([SCHEME, str(self.cost), *random_hash])
         self._failures: dict[str, deque[float]] = {}
         self._pending = 0
         self._executor = ThreadPoolExecutor(1, thread_name_prefix="gateway-login")
@@ -177,7 +137,7 @@ class LoginGuard:
     def check(self, username: str | None, password: str | None) -> bool:
         """Whether ``password`` is ``username``'s, at the same cost whatever the answer."""
         stored = self._users.get(username) if username else None
-        usable = password is not None and 0 < len(password) <= _MAX_PASSWORD
+        usable = password is not None and 0 < len(password) <= MAX_PASSWORD
         target = stored if stored is not None else self._dummy
         match = verify_password(password if usable and password else "", target)
         pad = self.cost - _iterations(target)

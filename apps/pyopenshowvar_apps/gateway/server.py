@@ -27,13 +27,12 @@ import time
 from datetime import UTC, datetime
 from types import TracebackType
 from typing import Self
-from urllib.parse import urlsplit
 
 from asyncua.common.connection import TransportLimits
 
 from . import ua
 from .cell import CellConfig
-from .live import Sink
+from .livenodes import Sink
 from .model import GATEWAY_URI, Instantiator, load_nodesets
 from .poller import RobotPoller
 from .robotics import CellNodes, RobotBuilder, RobotNodes, build_cell
@@ -245,7 +244,3 @@ def _version() -> str:
 
 def _url_host(host: str) -> str:
     return f"[{host}]" if ":" in host else host
-
-
-def endpoint_port(url: str) -> int:
-    return urlsplit(url).port or 0

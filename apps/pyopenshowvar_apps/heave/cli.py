@@ -154,18 +154,7 @@ def _run(
             say(
                 f"embedded emulator on {rig.kvp_address[1]}, platform PLC on {rig.modbus_address[1]}"
             )
-            return asyncio.run(
-                run_session(
-                    plan,
-                    kvp_address=rig.kvp_address,
-                    modbus_address=rig.modbus_address,
-                    accel_port=rig.accel_port,
-                    truth=rig.truth,
-                    out_dir=out,
-                    plots=plots,
-                    on_phase=say,
-                )
-            )
+            return rig.run(plan, out_dir=out, plots=plots, on_phase=say)
     return asyncio.run(
         run_session(
             plan,

@@ -8,13 +8,12 @@ is exactly ½, and any half period holds one crest). Runs in real time whatever 
 
 from __future__ import annotations
 
-import asyncio
 from pathlib import Path
 
 from ..casestudies.common import CaseResult
 from .experiment import HeavePlan
 from .operator import ScriptedOperator, square
-from .runner import EmbeddedRig, run_session
+from .runner import EmbeddedRig
 
 __all__ = ["demo_case"]
 
@@ -30,16 +29,7 @@ def demo_case(
         square(plan.waves.ramp + plan.off + plan.settle + 0.5, leg=1.0)
     )
     with EmbeddedRig(seed=seed, plant=plant) as rig:
-        res = asyncio.run(
-            run_session(
-                plan,
-                kvp_address=rig.kvp_address,
-                modbus_address=rig.modbus_address,
-                accel_port=rig.accel_port,
-                truth=rig.truth,
-                out_dir=out,
-            )
-        )
+        res = rig.run(plan, out_dir=out)
     result = CaseResult("heave compensation")
     for a in "xyz":
         result.metrics[f"attenuation_rms_{a}_pct"] = res.metrics[f"attenuation_rms_{a}"]

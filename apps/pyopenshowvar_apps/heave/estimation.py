@@ -194,10 +194,6 @@ class PlatformEstimator:
             min(max(theta, -MAX_TILT), MAX_TILT),
         )
 
-    def age(self, now: float) -> float:
-        """Seconds since the oldest of the three signals was last sampled."""
-        return now - min(self.z.last_time, self.phi.last_time, self.theta.last_time)
-
 
 class LagEstimator:
     """Delay (s) between commanded and measured base-frame flange positions."""

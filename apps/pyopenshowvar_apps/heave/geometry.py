@@ -66,11 +66,6 @@ class PlatformPose:
     def as_array(self) -> FloatArray:
         return np.array([self.z, self.phi, self.theta], dtype=np.float64)
 
-    @classmethod
-    def from_array(cls, values: npt.ArrayLike) -> PlatformPose:
-        z, phi, theta = (float(v) for v in np.asarray(values, dtype=np.float64).reshape(3))
-        return cls(z, phi, theta)
-
 
 def translation(x: float, y: float, z: float) -> FloatArray:
     t = np.eye(4)
@@ -135,12 +130,6 @@ class PlatformGeometry:
         cos_alpha = (hh**2 + self.a1**2 - self.a2**2) / (2.0 * hh * self.a1)
         alpha = np.degrees(np.arccos(np.clip(cos_alpha, -1.0, 1.0)))
         return np.asarray(self.beta_max - alpha, dtype=np.float64)
-
-    def leg_slope(self, beta: npt.ArrayLike) -> FloatArray:
-        """dh/dβ (mm per degree): how fast a corner rises per degree of its motor."""
-        b = np.asarray(beta, dtype=np.float64)
-        step = 1e-4
-        return (self.leg_height(b + step) - self.leg_height(b - step)) / (2 * step)
 
     @property
     def stroke(self) -> tuple[float, float]:

@@ -9,7 +9,6 @@ time-optimal approach that brakes in time to stop on the target.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -251,7 +250,3 @@ def validate_commands(words: list[int]) -> str | None:
         if not lo <= value <= hi:
             return f"holding register {i} = {value} outside {lo}…{hi}"
     return None
-
-
-def is_finite_pose(pose: PlatformPose) -> bool:
-    return all(math.isfinite(v) for v in (pose.z, pose.phi, pose.theta))

@@ -4,12 +4,13 @@
   profile and a platform simulator, each on its own thread and loop, as separate as the real
   controller and PLC; the ground-truth recorder rides on the platform's PLC scans and reads the
   simulated robot's axes (:func:`robot_axes`) — the one place that looks inside the emulator.
-* :func:`run_session` — connects the clients (KVP, Modbus, accelerometer), runs the experiment,
+* :func:`run_session` (:meth:`EmbeddedRig.run` on the embedded rig) — connects the clients (KVP, Modbus, accelerometer), runs the experiment,
   analyses it and writes the files.
 """
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Self
@@ -83,6 +84,29 @@ class EmbeddedRig:
     def accel_port(self) -> str | None:
         assert self.platform is not None
         return self.platform.sim.accel_path
+
+    def run(
+        self,
+        plan: HeavePlan,
+        *,
+        out_dir: Path | None = None,
+        plots: bool = True,
+        on_phase: Callable[[str], None] | None = None,
+    ) -> HeaveResult:
+        """:func:`run_session` against this rig (its addresses and ground truth), on an event
+        loop of its own."""
+        return asyncio.run(
+            run_session(
+                plan,
+                kvp_address=self.kvp_address,
+                modbus_address=self.modbus_address,
+                accel_port=self.accel_port,
+                truth=self.truth,
+                out_dir=out_dir,
+                plots=plots,
+                on_phase=on_phase,
+            )
+        )
 
 
 async def run_session(

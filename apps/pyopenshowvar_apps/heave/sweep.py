@@ -10,7 +10,6 @@ between the two frequencies around it).
 
 from __future__ import annotations
 
-import asyncio
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -23,7 +22,7 @@ from ..casestudies.common import new_figure, save_figure, write_csv
 from .control import ControlConfig
 from .experiment import HeavePlan
 from .plc import MotorLimits
-from .runner import EmbeddedRig, run_session
+from .runner import EmbeddedRig
 from .waves import WaveGenerator
 
 __all__ = ["DEFAULT_FREQUENCIES", "SWEEP_MOTORS", "SweepResult", "breakdown_frequency", "run_sweep"]
@@ -75,16 +74,7 @@ def run_sweep(
         span = _window(f, minimum_window)
         plan = HeavePlan(waves, off=span, on=span, settle=0.5, control=control or ControlConfig())
         with EmbeddedRig(seed=seed, motors=SWEEP_MOTORS, plant=plant) as rig:
-            res = asyncio.run(
-                run_session(
-                    plan,
-                    kvp_address=rig.kvp_address,
-                    modbus_address=rig.modbus_address,
-                    accel_port=rig.accel_port,
-                    truth=rig.truth,
-                    out_dir=None,
-                )
-            )
+            res = rig.run(plan)
         m = res.metrics
         row = {
             "frequency_hz": f,

@@ -1,8 +1,8 @@
 """The web page of ``kvp universal``: the jog pad as an input device, and the 3D view.
 
 A page of its own (``static/universal.html``, ``static/universal.js``) that reuses the web
-jog pad's assets — its style sheet and its 3D arm view (``/static/view3d.js`` is served from
-the pad's own folder, nothing is copied) — and the pad's safety rules:
+jog pad's assets — its head and style sheet and its 3D arm view (``/static/view3d.js`` is
+served from the pad's own folder, nothing is copied) — and the pad's safety rules:
 
 * **hold to move**: an axis button held sends ``jog`` at once and every 25 ms; the signal is
   non-zero only while those arrive (:data:`HOLD_TIMEOUT`); letting go, the pointer leaving,
@@ -37,17 +37,22 @@ from typing import Any
 import numpy as np
 import uvicorn
 from starlette.applications import Starlette
-from starlette.middleware import Middleware
-from starlette.middleware.trustedhost import TrustedHostMiddleware
 from starlette.requests import Request
-from starlette.responses import FileResponse, Response
+from starlette.responses import Response
 from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from ..web.httpguard import HEAD_TIMEOUT, TOTAL, ConnectionGuard, LogLimit, guarded_protocols
 from ..web.policy import TokenBucket, Violation, parse_message, refuse_connection
-from ..web.server import _CLOSED, LOOPBACK_HOSTS, MAX_MESSAGE, STATIC, _SecurityHeaders
+from ..web.server import (
+    _CLOSED,
+    MAX_MESSAGE,
+    STATIC,
+    build_page,
+    close_quietly,
+    guarded_app,
+)
 from .inputs import InputDevice, InputSample
 
 __all__ = ["HOLD_TIMEOUT", "ViewServer", "WebInput", "create_app"]
@@ -137,18 +142,66 @@ def create_app(
     server: Any, web_input: WebInput | None, *, token: str | None, hz: float
 ) -> Starlette:
     """The page, its static files, the pad's static files and the WebSocket."""
+    view = _ViewPages(server, web_input, token=token, hz=hz)
+    routes = [
+        Route("/", view.index),
+        Mount("/u", StaticFiles(directory=OWN_STATIC), name="own"),
+        Mount("/static", StaticFiles(directory=STATIC), name="static"),
+        WebSocketRoute("/ws", view.stream),
+    ]
+    app = guarded_app(routes, token)
+    app.state.publish = view.publish
+    return app
 
-    async def index(request: Request) -> Response:
-        return FileResponse(OWN_STATIC / "universal.html")
 
-    pages: set[_Page] = set()
-    limit = LogLimit(log)  # what pages do wrong is logged, but never floods the log
+class _ViewPages:
+    """The connected pages and the handlers behind the routes: :meth:`index`, :meth:`stream`
+    (one page's connection) and :meth:`publish` (the server's state to every page)."""
 
-    async def close(ws: WebSocket, code: int, reason: str) -> None:
-        with contextlib.suppress(*_CLOSED):  # the pad's list of "the page has gone"
-            await ws.close(code=code, reason=reason)
+    def __init__(
+        self, server: Any, web_input: WebInput | None, *, token: str | None, hz: float
+    ) -> None:
+        self.server, self.web_input, self.token, self.hz = server, web_input, token, hz
+        self.pages: set[_Page] = set()
+        self.limit = LogLimit(log)  # what pages do wrong is logged, but never floods the log
+        self.html = build_page("kvp universal", OWN_STATIC / "universal.html", ["/u/universal.css"])
 
-    async def sender(page: _Page) -> None:
+    async def index(self, request: Request) -> Response:
+        return Response(self.html, media_type="text/html")
+
+    async def stream(self, ws: WebSocket) -> None:
+        host = ws.client.host if ws.client else "?"
+        why = refuse_connection(
+            ws.headers.get("origin"), ws.headers.get("host", ""), ws.query_params.get("token"),
+            self.token,
+        )  # fmt: skip
+        if why is not None:
+            self.limit.warning(f"refused {host}", "refused a WebSocket from %s: %s", host, why)
+            await close_quietly(ws, 1008, why)
+            return
+        if len(self.pages) >= MAX_PAGES:
+            await close_quietly(ws, 1013, "too many pages")
+            return
+        await ws.accept()
+        page = _Page(ws)
+        self.pages.add(page)
+        if self.web_input is not None:
+            self.web_input.pages.add(page)
+        await ws.send_text(json.dumps({"t": "hello", "input": self.web_input is not None,
+                                       "hold_timeout": HOLD_TIMEOUT}))  # fmt: skip
+        task = asyncio.create_task(self._sender(page))
+        try:
+            await self._receive_loop(page, host)
+        except _CLOSED:
+            pass  # a page going away is normal, never a traceback
+        finally:
+            self.pages.discard(page)
+            if self.web_input is not None:
+                self.web_input.forget(page)
+            task.cancel()
+
+    @staticmethod
+    async def _sender(page: _Page) -> None:
         with contextlib.suppress(WebSocketDisconnect, RuntimeError):
             while True:
                 await page.wake.wait()
@@ -157,88 +210,51 @@ def create_app(
                 if state is not None:
                     await page.ws.send_text(json.dumps(state))
 
-    async def stream(ws: WebSocket) -> None:
-        host = ws.client.host if ws.client else "?"
-        why = refuse_connection(
-            ws.headers.get("origin"), ws.headers.get("host", ""), ws.query_params.get("token"),
-            token,
-        )  # fmt: skip
-        if why is not None:
-            limit.warning(f"refused {host}", "refused a WebSocket from %s: %s", host, why)
-            await close(ws, 1008, why)
-            return
-        if len(pages) >= MAX_PAGES:
-            await close(ws, 1013, "too many pages")
-            return
-        await ws.accept()
-        page = _Page(ws)
-        pages.add(page)
-        if web_input is not None:
-            web_input.pages.add(page)
-        await ws.send_text(json.dumps({"t": "hello", "input": web_input is not None,
-                                       "hold_timeout": HOLD_TIMEOUT}))  # fmt: skip
-        task = asyncio.create_task(sender(page))
-        try:
-            while True:
-                message = await ws.receive()
-                if message["type"] == "websocket.disconnect":
-                    break
-                if not page.bucket.allow(time.monotonic()):
-                    await close(ws, 1008, "too many messages")
-                    break
-                text = message.get("text")
-                try:
-                    msg = parse_message(text if text is not None else message.get("bytes"))
-                except Violation as exc:
-                    limit.warning(
-                        f"closed {host}", "closed a WebSocket of %s: %s", host, exc.reason
-                    )
-                    await close(ws, exc.code, exc.reason)
-                    break
-                try:
-                    if web_input is None:
-                        if msg.get("t") != "alive":
-                            raise ValueError("this page only views: the input is another device")
-                        continue
-                    why_not = web_input.handle(page, msg)
-                    if why_not is not None:
-                        page.state = {"t": "refused", "reason": why_not}
-                        page.wake.set()
-                except (KeyError, TypeError, ValueError) as exc:
-                    page.state = {"t": "error", "message": str(exc)[:200]}
-                    page.wake.set()
-                # one message per turn of the event loop: a flooding page cannot stall others
-                await asyncio.sleep(0)
-        except _CLOSED:
-            pass  # a page going away is normal, never a traceback
-        finally:
-            pages.discard(page)
-            if web_input is not None:
-                web_input.forget(page)
-            task.cancel()
-
-    async def publish() -> None:
+    async def _receive_loop(self, page: _Page, host: str) -> None:
+        ws = page.ws
         while True:
-            await asyncio.sleep(1.0 / hz)
-            if not pages:
+            message = await ws.receive()
+            if message["type"] == "websocket.disconnect":
+                return
+            if not page.bucket.allow(time.monotonic()):
+                await close_quietly(ws, 1008, "too many messages")
+                return
+            text = message.get("text")
+            try:
+                msg = parse_message(text if text is not None else message.get("bytes"))
+            except Violation as exc:
+                self.limit.warning(
+                    f"closed {host}", "closed a WebSocket of %s: %s", host, exc.reason
+                )
+                await close_quietly(ws, exc.code, exc.reason)
+                return
+            self._handle(page, msg)
+            # one message per turn of the event loop: a flooding page cannot stall others
+            await asyncio.sleep(0)
+
+    def _handle(self, page: _Page, msg: dict[str, Any]) -> None:
+        try:
+            if self.web_input is None:
+                if msg.get("t") != "alive":
+                    raise ValueError("this page only views: the input is another device")
+                return
+            why_not = self.web_input.handle(page, msg)
+            if why_not is not None:
+                page.state = {"t": "refused", "reason": why_not}
+                page.wake.set()
+        except (KeyError, TypeError, ValueError) as exc:
+            page.state = {"t": "error", "message": str(exc)[:200]}
+            page.wake.set()
+
+    async def publish(self) -> None:
+        while True:
+            await asyncio.sleep(1.0 / self.hz)
+            if not self.pages:
                 continue
-            state = {"t": "state", **server.status()}
-            for page in pages:
+            state = {"t": "state", **self.server.status()}
+            for page in self.pages:
                 page.state = state
                 page.wake.set()
-
-    routes = [
-        Route("/", index),
-        Mount("/u", StaticFiles(directory=OWN_STATIC), name="own"),
-        Mount("/static", StaticFiles(directory=STATIC), name="static"),
-        WebSocketRoute("/ws", stream),
-    ]
-    middleware = [Middleware(_SecurityHeaders)]
-    if token is None:
-        middleware.append(Middleware(TrustedHostMiddleware, allowed_hosts=list(LOOPBACK_HOSTS)))
-    app = Starlette(routes=routes, middleware=middleware)
-    app.state.publish = publish
-    return app
 
 
 class ViewServer:

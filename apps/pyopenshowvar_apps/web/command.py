@@ -63,7 +63,8 @@ def web(
     With the global --emulate, an embedded emulator runs the KVP_JOG program.
     """
     from pyopenshowvar_apps.armpick import given_arm
-    from pyopenshowvar_apps.web.runner import KRL_DIR, WebServer, is_loopback, lan_address
+    from pyopenshowvar_apps.hosts import is_loopback
+    from pyopenshowvar_apps.web.runner import KRL_DIR, WebServer, lan_address
 
     if krl_dir is not None:
         krl_dir.mkdir(parents=True, exist_ok=True)

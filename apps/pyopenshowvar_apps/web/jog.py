@@ -41,7 +41,7 @@ from pyopenshowvar.kinematics import (
 )
 
 from .jogplan import CREDIT, JogPlan, JogRequest, plan_jog
-from .link import RobotLink, axes_of, frame6
+from .robotlink import RobotLink, axes_of, frame6
 
 __all__ = ["HOLD_TIMEOUT", "TOPUP", "JogController"]
 

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import ipaddress
 import socket
 from pathlib import Path
 from types import TracebackType
@@ -21,23 +20,13 @@ from pyopenshowvar import Client
 from ..armpick import ArmChoice
 from .httpguard import HEAD_TIMEOUT, TOTAL, ConnectionGuard, guarded_protocols
 from .jog import JogController
-from .link import RobotLink
+from .robotlink import RobotLink
 from .server import MAX_MESSAGE, WebConfig, create_app
 
-__all__ = ["KRL_DIR", "WebServer", "is_loopback", "lan_address"]
+__all__ = ["KRL_DIR", "WebServer", "lan_address"]
 
 #: The shipped KVP_JOG program and its $CONFIG.DAT globals.
 KRL_DIR = Path(__file__).with_name("krl")
-
-
-def is_loopback(host: str) -> bool:
-    """Whether binding ``host`` keeps the server on this machine."""
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
 
 
 def lan_address() -> str:
