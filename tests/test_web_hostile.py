@@ -140,6 +140,7 @@ async def test_a_keep_alive_cannot_change_its_button(
     rig: tuple[Emulator, WebServer, Client],
 ) -> None:
     _emu, web, kvp = rig
+    web.jog.hold_timeout = 5.0  # only the changed button may end this press (a loaded machine)
     ws = await page(web)
     await hold(ws, 0.1)
     assert web.jog.jog is not None and web.jog.jog.req.key == "A1"
@@ -248,7 +249,9 @@ async def test_a_request_head_must_arrive_in_time(
     finally:
         writer.close()
     assert answer.startswith(b"HTTP/1.1 408 ")
-    assert 0.3 <= time.monotonic() - t0 < 1.5 and web.guard.timed_out == 1
+    # answered after the head timeout, long before the head would have been complete (the
+    # upper bound leaves a loaded machine's scheduling delays room)
+    assert 0.3 <= time.monotonic() - t0 < 5.0 and web.guard.timed_out == 1
     # a keep-alive connection gets the same time for its next request head, then is closed
     reader, writer = await asyncio.open_connection("127.0.0.1", web.port)
     writer.write(b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
