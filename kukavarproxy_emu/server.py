@@ -62,7 +62,7 @@ if TYPE_CHECKING:
 
     from .c3 import C3Server
     from .kvp9_connection import Kvp9Connection
-    from .motion import Robot
+    from .robot_task import Robot
 
 __all__ = ["ConnectionInfo", "Emulator", "Stats"]
 
@@ -626,7 +626,7 @@ class Emulator:
             log.warning("serving before the robot's first IPO cycle (the machine is too busy)")
 
     def _start_robot(self) -> None:
-        from .motion import Robot  # imported late: numpy kinematics only when a robot runs
+        from .robot_task import Robot  # imported late: numpy kinematics only when a robot runs
         from .robots import resolve_robot
 
         cfg = self.config

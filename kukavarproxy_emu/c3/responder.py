@@ -62,7 +62,7 @@ from .filemsgs import FileHandlers, IoBuffers
 from .vfs import Limits, VirtualFS
 
 if TYPE_CHECKING:
-    from ..motion import Robot
+    from ..robot_task import Robot
     from ..store import VariableStore
 
 __all__ = ["HANDLED", "VERSION", "C3Server", "C3Session"]
