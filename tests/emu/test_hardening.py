@@ -22,7 +22,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from kukavarproxy_emu import Emulator, EmulatorConfig, server
+from kukavarproxy_emu import Emulator, EmulatorConfig, kvp_connection
 from kukavarproxy_emu.__main__ import build_parser, config_from_args
 from kukavarproxy_emu.handler import Responder
 from kukavarproxy_emu.store import VariableStore
@@ -121,7 +121,7 @@ async def test_idle_drop_of_a_non_reading_client_frees_its_slot(
 async def test_garbage_after_unread_requests_frees_the_slot_after_the_grace(
     emulator_factory: EmulatorFactory, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(server, "ERROR_GRACE", 0.3)
+    monkeypatch.setattr(kvp_connection, "ERROR_GRACE", 0.3)
     emu = await emulator_factory(robot=False, max_clients=1, idle_timeout=0)
     loop = asyncio.get_running_loop()
     sock = await raw_socket(emu)

@@ -351,12 +351,12 @@ async def test_a_read_paused_at_every_step_answers_the_same_bytes(
     monkeypatch.setattr(server, "ROUND", 0.0)
     emu = await kvp9(emulator_factory)
     served: list[int] = []
-    original = kvp9_connection.Kvp9Connection._serve
+    original = kvp9_connection.Kvp9Connection.serve
 
     def counted(self: kvp9_connection.Kvp9Connection, budget: float) -> None:
         served.append(1)
         original(self, budget)
 
-    monkeypatch.setattr(kvp9_connection.Kvp9Connection, "_serve", counted)
+    monkeypatch.setattr(kvp9_connection.Kvp9Connection, "serve", counted)
     assert await answer(emu) == whole
     assert len(whole) > 100 and len(served) >= 6  # it really paused, many times
