@@ -23,8 +23,8 @@ from .logsafe import RateLimitedLog
 if TYPE_CHECKING:
     from .config import EmulatorConfig
     from .faults import FaultSet
-    from .handler import Responder
     from .latency import ServiceQueue
+    from .responder import Responder
     from .robot_task import Robot
 
 __all__ = [

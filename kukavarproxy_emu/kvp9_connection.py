@@ -5,7 +5,7 @@
 reads at most 2048 bytes per event (``sockServer(Index).Read(strBuffer, 2048)``), hands them to
 :func:`~kukavarproxy_emu.kvp9.sock_server_read` and keeps nothing for the next read: a request cut
 by a read boundary is lost or mis-parsed exactly like on the controller. Answers come from the
-emulator's shared :class:`~kukavarproxy_emu.handler.Responder` (its ``show_var``/``set_var``).
+emulator's shared :class:`~kukavarproxy_emu.responder.Responder` (its ``show_var``/``set_var``).
 
 Bounds, per connection: one read of 2048 bytes holds at most 512 requests (each consumes at least
 its 4 header bytes), so one event does at most 512 store calls and writes at most 512 replies.
@@ -42,8 +42,8 @@ from typing import Any
 
 from .connection_base import IMMEDIATE, SLICE, Connection, ConnectionInfo, Host
 from .faults import send_reply
-from .handler import Responder
-from .kvp9 import READ_SIZE, ReadOutcome, sock_server_read
+from .kvp9 import KVP_READ_BYTES, ReadOutcome, sock_server_read
+from .responder import Responder
 
 __all__ = ["FLUSH_SIZE", "SEND_LIMIT", "Kvp9Connection", "Kvp9ConnectionInfo"]
 
@@ -180,7 +180,7 @@ class Kvp9Connection(Connection):
     """One client of the wire-faithful mode (``EmulatorConfig(wire="kvp9")``)."""
 
     def __init__(self, emu: Host) -> None:
-        super().__init__(emu, READ_SIZE)
+        super().__init__(emu, KVP_READ_BYTES)
         #: The proxy dropped us (send buffer full, or a fault closed the socket): later replies
         #: of the same read are computed (writes still apply, as in VB) but not sent.
         self.dropped = False

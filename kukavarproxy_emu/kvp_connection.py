@@ -32,8 +32,8 @@ from pyopenshowvar.protocol import FramingError, Reply, Request, RequestDecoder,
 
 from .connection_base import IMMEDIATE, SLICE, Connection, ConnectionInfo, Host, limited_conn
 from .faults import send_reply
-from .handler import Deferred
 from .logsafe import clip
+from .responder import Deferred
 
 __all__ = ["FRAMED_READ_BYTES", "OUTPUT_LIMIT", "KvpConnection"]
 

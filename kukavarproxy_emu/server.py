@@ -11,10 +11,10 @@ Layers, top down:
   :class:`~kukavarproxy_emu.kvp_connection.KvpConnection` (frames reassembled across reads)
   or, with ``wire="kvp9"``, :class:`~kukavarproxy_emu.kvp9_connection.Kvp9Connection` (each
   2048-byte read parsed on its own, as KUKAVARPROXY 9.0 does);
-* :class:`~kukavarproxy_emu.handler.Responder` — pure request → :class:`~pyopenshowvar.protocol.Reply`
+* :class:`~kukavarproxy_emu.responder.Responder` — pure request → :class:`~pyopenshowvar.protocol.Reply`
   logic with KVP 9.0 semantics (reference §2.4, §4.1), no I/O.
 
-:class:`~kukavarproxy_emu.threaded.EmulatorThread` runs an Emulator in a daemon thread for
+:class:`~kukavarproxy_emu.emulator_thread.EmulatorThread` runs an Emulator in a daemon thread for
 synchronous code.
 """
 
@@ -30,12 +30,12 @@ from typing import TYPE_CHECKING, Self
 
 from .config import EmulatorConfig
 from .connection_base import ROUND, SLICE, Connection, ConnectionInfo, Stats, limited_conn
-from .discovery import DiscoveryProtocol, start_discovery
 from .faults import FaultSet
-from .handler import Responder, build_store
 from .kvp9_connection import Kvp9Connection
 from .kvp_connection import KvpConnection
+from .kvp_discovery import DiscoveryProtocol, start_discovery
 from .latency import ServiceQueue
+from .responder import Responder, build_store
 from .store import VariableStore
 
 if TYPE_CHECKING:

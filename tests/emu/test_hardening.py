@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 
 from kukavarproxy_emu import Emulator, EmulatorConfig, kvp_connection
 from kukavarproxy_emu.__main__ import build_parser, config_from_args
-from kukavarproxy_emu.handler import Responder
+from kukavarproxy_emu.responder import Responder
 from kukavarproxy_emu.store import VariableStore
 from kukavarproxy_emu.testing import EmulatorFactory, RawClient
 from pyopenshowvar.protocol import (
@@ -412,7 +412,7 @@ def test_whole_array_reads_after_mode3_writes_stay_cheap() -> None:
     )
 )
 def test_mode2_words_equal_vb_clng_element_by_element(tokens: list[str]) -> None:
-    from kukavarproxy_emu.handler import _pack_words, _to_word  # the fast path, and VB's rule
+    from kukavarproxy_emu.responder import _pack_words, _to_word  # the fast path, and VB's rule
 
     try:
         expected: bytes | None = b"".join(struct.pack(">H", _to_word(t)) for t in tokens)
