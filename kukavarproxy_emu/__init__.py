@@ -23,7 +23,7 @@ if TYPE_CHECKING:
     from .responder import Responder, build_store
     from .server import ConnectionInfo, Emulator, Stats
 
-# Imported on first use, so `import kukavarproxy_emu.datfile` (or the store) does not pull in
+# Imported on first use, so `import kukavarproxy_emu.store` does not pull in
 # asyncio and the server.
 _LAZY = {
     "Cell": "cell",

@@ -36,10 +36,11 @@ from pyopenshowvar.krl import (
     TypeSpec,
     format_krc4,
 )
+from pyopenshowvar.krl.datfile import DatFile, parse_dat
+from pyopenshowvar.sysvars import system_variables
 
-from .datfile import DatFile, load_default_config, parse_dat
+from .default_config import load_default_config
 from .names import Var, VarPath, parse_name
-from .sysvars import system_variables
 from .values import CHAR_LEN, Range, Refused, check, check_ranges, coerce, parse_text, rebuild
 
 __all__ = ["Range", "UnknownVariable", "VariableStore", "WriteRefused"]
