@@ -103,6 +103,65 @@ class _OtherThreadsWait:
         pass
 
 
+class _TimedLink:
+    """The probe's blocking connection: sends one request, waits for its reply and records the
+    round trip (ms); with the emulator's process id also the round trip less the time spent
+    waiting for a core (``net``) and the emulator's CPU time (``cpu``)."""
+
+    def __init__(self, sock: socket.socket, emulator_pid: int | None) -> None:
+        self.sock = sock
+        self.samples: list[float] = []
+        self.net: list[float] = []
+        self.cpu: list[float] = []
+        self.clock = cpu_clock(emulator_pid) if emulator_pid is not None else None
+        self.waits: list[_RunQueueWait | _OtherThreadsWait] = []
+        if emulator_pid is not None:  # the emulator's event loop runs in its main thread
+            self.waits = [_RunQueueWait(f"/proc/{emulator_pid}/schedstat"),
+                          _OtherThreadsWait(emulator_pid),
+                          _RunQueueWait("/proc/thread-self/schedstat")]  # fmt: skip
+        self.decoder = ReplyDecoder()
+        self.pending: list[Reply] = []
+
+    def request(self, frame: bytes) -> Reply:
+        clock, waits, pending = self.clock, self.waits, self.pending
+        if clock is not None:
+            waited = sum(wait() for wait in waits)
+            cpu = time.clock_gettime(clock)
+        start = time.perf_counter()
+        self.sock.sendall(frame)
+        while not pending:
+            data = self.sock.recv(65536)
+            if not data:
+                raise ConnectionError("closed by the emulator")
+            pending.extend(self.decoder.feed_replies(data))
+        wall = (time.perf_counter() - start) * 1e3
+        self.samples.append(wall)
+        if clock is not None:
+            self.cpu.append((time.clock_gettime(clock) - cpu) * 1e3)
+            self.net.append(wall - (sum(wait() for wait in waits) - waited) / 1e6)
+        return pending.pop(0)
+
+    def close(self) -> None:
+        self.sock.close()
+        for wait in self.waits:
+            wait.close()
+
+    def summarise(self, result: ProbeResult) -> ProbeResult:
+        """``result`` with the percentiles of what was recorded."""
+        result.requests = len(self.samples)
+        result.p50_ms, result.p99_ms, result.max_ms = _spread(self.samples)
+        result.net_p50_ms, result.net_p99_ms, result.net_max_ms = _spread(self.net)
+        result.cpu_p50_ms, result.cpu_p99_ms, result.cpu_max_ms = _spread(self.cpu)
+        return result
+
+
+def _spread(samples: list[float]) -> tuple[float, float, float]:
+    """p50, p99 and maximum of ``samples`` (sorted in place), 0 for none."""
+    samples.sort()
+    top = samples[-1] if samples else 0.0
+    return _percentile(samples, 0.50), _percentile(samples, 0.99), top
+
+
 def run_probe(
     host: str,
     port: int,
@@ -122,39 +181,12 @@ def run_probe(
     ``emulator_pid`` (Linux) the net round trips and the emulator's CPU time are measured too
     (``net_*``, ``cpu_*`` of the result)."""
     result = ProbeResult()
-    samples: list[float] = []
-    net_samples: list[float] = []
-    cpu_samples: list[float] = []
-    clock = cpu_clock(emulator_pid) if emulator_pid is not None else None
-    waits: list[_RunQueueWait | _OtherThreadsWait] = []
-    if emulator_pid is not None:  # the emulator's event loop runs in its main thread
-        waits = [_RunQueueWait(f"/proc/{emulator_pid}/schedstat"),
-                 _OtherThreadsWait(emulator_pid),
-                 _RunQueueWait("/proc/thread-self/schedstat")]  # fmt: skip
     sock = socket.create_connection((host, port), timeout=2.0)
     sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    link = _TimedLink(sock, emulator_pid)
     if ready is not None:
         ready()
-    decoder = ReplyDecoder()
-    pending: list[Reply] = []
-
-    def request(frame: bytes) -> Reply:
-        if clock is not None:
-            waited = sum(wait() for wait in waits)
-            cpu = time.clock_gettime(clock)
-        start = time.perf_counter()
-        sock.sendall(frame)
-        while not pending:
-            data = sock.recv(65536)
-            if not data:
-                raise ConnectionError("closed by the emulator")
-            pending.extend(decoder.feed_replies(data))
-        wall = (time.perf_counter() - start) * 1e3
-        samples.append(wall)
-        if clock is not None:
-            cpu_samples.append((time.clock_gettime(clock) - cpu) * 1e3)
-            net_samples.append(wall - (sum(wait() for wait in waits) - waited) / 1e6)
-        return pending.pop(0)
+    request = link.request
 
     def check(reply: Reply, msg_id: int, expect: str, what: str) -> None:
         if reply.msg_id != msg_id or not reply.ok or reply.text != expect:
@@ -165,7 +197,7 @@ def run_probe(
     end = time.monotonic() + seconds
 
     def more() -> bool:
-        if len(samples) < min_requests:
+        if len(link.samples) < min_requests:
             return True  # a busy machine slows the probe down: it still gets its sample
         return time.monotonic() < end and (stop is None or not stop())
 
@@ -186,23 +218,8 @@ def run_probe(
         result.errors += 1
         result.notes.append(f"error: {exc}")
     finally:
-        sock.close()
-        for wait in waits:
-            wait.close()
-    samples.sort()
-    result.requests = len(samples)
-    result.p50_ms = _percentile(samples, 0.50)
-    result.p99_ms = _percentile(samples, 0.99)
-    result.max_ms = samples[-1] if samples else 0.0
-    net_samples.sort()
-    result.net_p50_ms = _percentile(net_samples, 0.50)
-    result.net_p99_ms = _percentile(net_samples, 0.99)
-    result.net_max_ms = net_samples[-1] if net_samples else 0.0
-    cpu_samples.sort()
-    result.cpu_p50_ms = _percentile(cpu_samples, 0.50)
-    result.cpu_p99_ms = _percentile(cpu_samples, 0.99)
-    result.cpu_max_ms = cpu_samples[-1] if cpu_samples else 0.0
-    return result
+        link.close()
+    return link.summarise(result)
 
 
 class Probe:
