@@ -5,10 +5,10 @@ The emulator runs in its own process (``kukavarproxy-emu``), the bystander
 5 ms) in another; the abusers run in this process. Figures:
 
 1. ``--wire kvp9`` (and, for comparison, ``--wire robust``): ten clients flooding pipelined
-   reads of the 24 KB ``$IN[]`` (:func:`kukavarproxy_emu.abuse_modes.in_flood`): the
+   reads of the 24 KB ``$IN[]`` (:func:`kukavarproxy_emu.abuse.in_flood`): the
    bystander's p50/p99/max and the emulator's peak RSS growth;
 2. ``--proxy c3bridge``: eight clients selecting a 64 KiB module again and again
-   (:func:`~kukavarproxy_emu.abuse_modes.c3_selects`): bystander p50/p99/max, and the time of
+   (:func:`~kukavarproxy_emu.abuse.c3_selects`): bystander p50/p99/max, and the time of
    one such select alone;
 3. ``--proxy c3bridge``: a #11 PTP to ``{A1 <400 digits>}`` — the reply's error code, or
    "closed" when the connection was closed without one;
@@ -45,8 +45,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import Row, base_parser, machine_info, median, print_rows, write_json
 
 from kukavarproxy_emu import Emulator, EmulatorConfig
-from kukavarproxy_emu.abuse import AbuseTally, EmulatorProcess, ProbeResult
-from kukavarproxy_emu.abuse_modes import big_module, c3_selects, in_flood, run_abuse
+from kukavarproxy_emu.abuse import (
+    AbuseTally,
+    EmulatorProcess,
+    ProbeResult,
+    big_module,
+    c3_selects,
+    in_flood,
+    run_abuse,
+)
 from pyopenshowvar import Client, sync
 from pyopenshowvar.c3.messages import Motion, ProgramSelect
 from pyopenshowvar.protocol import HEADER_SIZE, decode_reply

@@ -29,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import Row, base_parser, machine_info, print_rows, write_json
 
 from kukavarproxy_emu import Emulator, EmulatorConfig
-from kukavarproxy_emu.motion import Robot
+from kukavarproxy_emu.robot_task import Robot
 from kukavarproxy_emu.store import VariableStore
 from pyopenshowvar.kinematics import KR6R900SIXX, forward, inverse, matrix_to_frame, pose_to_matrix
 from pyopenshowvar.krl import E6Axis

@@ -1,6 +1,6 @@
 """Plant CPU benchmark: % of one core a simulated robot costs, at rest and moving, per plant.
 
-One robot (``kukavarproxy_emu.motion.Robot``, no program, no SPS) runs on its real-time IPO
+One robot (``kukavarproxy_emu.robot_task.Robot``, no program, no SPS) runs on its real-time IPO
 clock (12 ms, ``speed = 1``) in an asyncio loop for ``--seconds`` per scenario; the figure is
 process CPU time / wall time. Scenarios: at rest and moving (back-to-back 100 % PTPs between
 two poses), each without a reader and with one that reads ``$AXIS_ACT`` and
@@ -28,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _common import Row, base_parser, print_rows, write_json
 
-from kukavarproxy_emu.motion import Robot
+from kukavarproxy_emu.robot_task import Robot
 from kukavarproxy_emu.robots import resolve_robot
 from kukavarproxy_emu.store import VariableStore
 

@@ -36,8 +36,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _common import Row, base_parser, machine_info, print_rows, write_json
 
-from kukavarproxy_emu.motion import MotionRefused, Robot
+from kukavarproxy_emu.motion import MotionRefused
 from kukavarproxy_emu.plant.dynamic import DynamicPlant
+from kukavarproxy_emu.robot_task import Robot
 from kukavarproxy_emu.store import VariableStore
 from pyopenshowvar.kinematics import KR6R900SIXX, forward
 

@@ -16,14 +16,14 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from .cell import Cell, cell_configs
     from .config import EmulatorConfig
+    from .emulator_thread import EmulatorThread
     from .faults import Fault, FaultSet
-    from .handler import Responder, build_store
     from .latency import PROFILES, LatencyProfile, ServiceTime
     from .plant import Obstacle
+    from .responder import Responder, build_store
     from .server import ConnectionInfo, Emulator, Stats
-    from .threaded import EmulatorThread
 
-# Imported on first use, so `import kukavarproxy_emu.datfile` (or the store) does not pull in
+# Imported on first use, so `import kukavarproxy_emu.store` does not pull in
 # asyncio and the server.
 _LAZY = {
     "Cell": "cell",
@@ -37,10 +37,10 @@ _LAZY = {
     "Obstacle": "plant",
     "ConnectionInfo": "server",
     "Emulator": "server",
-    "EmulatorThread": "threaded",
-    "Responder": "handler",
+    "EmulatorThread": "emulator_thread",
+    "Responder": "responder",
     "Stats": "server",
-    "build_store": "handler",
+    "build_store": "responder",
 }
 
 

@@ -42,7 +42,7 @@ PROXIES = ("kvp", "c3bridge")
 #: limits, the emulator keeps 64 clients to bound its memory and drops no idle client.
 PROXY_LIMITS = {"kvp": (10, 30.0), "c3bridge": (64, 0.0)}
 #: ``--program`` names of the shipped KRL programs (kept here so the config does not import
-#: numpy-heavy motion code; ``kukavarproxy_emu.motion.PROGRAMS`` has the same keys, a test
+#: numpy-heavy motion code; ``kukavarproxy_emu.program_factory.PROGRAMS`` has the same keys, a test
 #: checks it). Any other ``--program`` is the path of a ``.src`` file.
 ROBOT_PROGRAMS = ("follow", "actuator", "ext_move_axis", "joint_path", "cart_path", "none")
 _KRL_SUFFIXES = (".src", ".sub")

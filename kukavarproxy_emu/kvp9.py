@@ -35,10 +35,18 @@ import re
 from dataclasses import dataclass
 from typing import Protocol
 
-__all__ = ["ReadOutcome", "VbError", "Wire", "long_to_word", "read_msg", "sock_server_read"]
+__all__ = [
+    "KVP_READ_BYTES",
+    "ReadOutcome",
+    "VbError",
+    "Wire",
+    "long_to_word",
+    "read_msg",
+    "sock_server_read",
+]
 
-#: ``sockServer(Index).Read(strBuffer, 2048)``: the most one socket event takes.
-READ_SIZE = 2048
+#: ``sockServer(Index).Read(strBuffer, 2048)``: the most one socket event of KUKAVARPROXY takes.
+KVP_READ_BYTES = 2048
 #: ``Dim sString(9) As String`` in readMsg: block indices 0..9.
 _MAX_BLOCKS = 10
 _VB_INTEGER_MAX = 0x7FFF

@@ -1,10 +1,11 @@
 """The ``--wire kvp9`` connection: every socket read parsed on its own, as KUKAVARPROXY 9.0 does.
 
-:class:`Kvp9Connection` is the wire-faithful sibling of the robust ``server._Connection``. It
+:class:`Kvp9Connection` is the wire-faithful sibling of the robust
+:class:`~kukavarproxy_emu.kvp_connection.KvpConnection`. It
 reads at most 2048 bytes per event (``sockServer(Index).Read(strBuffer, 2048)``), hands them to
 :func:`~kukavarproxy_emu.kvp9.sock_server_read` and keeps nothing for the next read: a request cut
 by a read boundary is lost or mis-parsed exactly like on the controller. Answers come from the
-emulator's shared :class:`~kukavarproxy_emu.handler.Responder` (its ``show_var``/``set_var``).
+emulator's shared :class:`~kukavarproxy_emu.responder.Responder` (its ``show_var``/``set_var``).
 
 Bounds, per connection: one read of 2048 bytes holds at most 512 requests (each consumes at least
 its 4 header bytes), so one event does at most 512 store calls and writes at most 512 replies.
@@ -16,7 +17,7 @@ Replies are written at least every :data:`FLUSH_SIZE` bytes, so at most SEND_LIM
 previous reply, so one 2048-byte read can answer ~0.5 MB: real KVP does the same).
 
 Without latency or faults a read is answered inside ``buffer_updated`` for up to ``IMMEDIATE``
-seconds, the same work budget as the robust mode (:mod:`kukavarproxy_emu.server`); a read that
+seconds, the same work budget as the robust mode (:mod:`kukavarproxy_emu.connection_base`); a read that
 needs longer (hundreds of whole-array reads) is parked where it stopped and continues in the
 emulator's rounds, ``SLICE`` per round and ``ROUND`` for all connections together, so a flooding
 client cannot hold the event loop and other clients are answered in between. VB's parsing is
@@ -32,21 +33,17 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import socket
 import time
 from collections import deque
 from collections.abc import Coroutine, Generator
 from dataclasses import dataclass
 from functools import partial
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+from .connection_base import IMMEDIATE, SLICE, Connection, ConnectionInfo, Host
 from .faults import send_reply
-from .handler import Responder
-from .kvp9 import READ_SIZE, ReadOutcome, sock_server_read
-from .server import IMMEDIATE, SLICE, ConnectionInfo
-
-if TYPE_CHECKING:
-    from .server import Emulator
+from .kvp9 import KVP_READ_BYTES, ReadOutcome, sock_server_read
+from .responder import Responder
 
 __all__ = ["FLUSH_SIZE", "SEND_LIMIT", "Kvp9Connection", "Kvp9ConnectionInfo"]
 
@@ -179,16 +176,11 @@ class _SlowWire:
                 conn.dropped = True
 
 
-class Kvp9Connection(asyncio.BufferedProtocol):
+class Kvp9Connection(Connection):
     """One client of the wire-faithful mode (``EmulatorConfig(wire="kvp9")``)."""
 
-    def __init__(self, emu: Emulator) -> None:
-        self.emu = emu
-        self.transport: asyncio.Transport | None = None
-        self.index = 0
-        self.peer = "?"
-        self.last_rx = time.monotonic()
-        self.closed = False
+    def __init__(self, emu: Host) -> None:
+        super().__init__(emu, KVP_READ_BYTES)
         #: The proxy dropped us (send buffer full, or a fault closed the socket): later replies
         #: of the same read are computed (writes still apply, as in VB) but not sent.
         self.dropped = False
@@ -201,11 +193,7 @@ class Kvp9Connection(asyncio.BufferedProtocol):
         self._backlog: deque[bytes] = deque()  # at most one read: reading pauses meanwhile
         #: The fast path's read in progress, parked until the emulator's next round.
         self._parked: _Read | None = None
-        #: Waiting in the emulator's round (``Emulator._enqueue``).
-        self._scheduled = False
         self._close_after_work = False
-        self._reading_paused = False
-        self._rbuf = memoryview(bytearray(READ_SIZE))
         self._fast = _FastWire(self)
         self._slow = _SlowWire(self)
         self._ping = emu.responder.ping
@@ -213,20 +201,8 @@ class Kvp9Connection(asyncio.BufferedProtocol):
     # -- asyncio callbacks ----------------------------------------------------------------
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        assert isinstance(transport, asyncio.Transport)
-        self.transport = transport
-        peer = transport.get_extra_info("peername")
-        self.peer = f"{peer[0]}:{peer[1]}" if peer else "?"
-        if not self.emu._admit(self):
-            self.closed = True  # accepted, then disconnected in the Connect event
-            transport.close()
+        if not self._accept(transport):  # accepted, then disconnected in the Connect event
             return
-        sock = transport.get_extra_info("socket")
-        if sock is not None:
-            try:
-                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            except OSError:
-                pass
         log.info("client %d connected from %s (wire kvp9)", self.index, self.peer)
 
     def connection_lost(self, exc: Exception | None) -> None:
@@ -234,13 +210,10 @@ class Kvp9Connection(asyncio.BufferedProtocol):
         # a failed Write), its replies go nowhere
         self.closed = True
         if self.index:
-            self.emu._forget(self)
+            self.emu.forget(self)
             log.info("client %d (%s) disconnected", self.index, self.peer)
         if self.worker is not None:
             self.worker.cancel()
-
-    def get_buffer(self, sizehint: int) -> memoryview:
-        return self._rbuf
 
     def buffer_updated(self, nbytes: int) -> None:
         if self.closed:
@@ -277,7 +250,7 @@ class Kvp9Connection(asyncio.BufferedProtocol):
         wire.steps = 0
         self._resume(sock_server_read(data, wire, ping=self._ping, legacy_ids=self.emu.legacy_ids))
 
-    def _serve(self, budget: float) -> None:
+    def serve(self, budget: float) -> None:
         """The emulator's round: continue the parked read for ``budget`` seconds (one step
         at least)."""
         read = self._parked
@@ -306,7 +279,7 @@ class Kvp9Connection(asyncio.BufferedProtocol):
         self._parked = read  # paused: what it answered so far goes out now
         wire.flush()
         self._set_reading(False)
-        self.emu._enqueue(self)
+        self.emu.enqueue(self)
 
     def _next_read(self) -> None:
         """After a fast-path read: a read that arrived meanwhile, the close owed, or reading."""

@@ -16,8 +16,8 @@ from functools import lru_cache
 from math import prod
 
 from pyopenshowvar.krl import Kind, KrlValue, TypeRegistry, TypeSpec
+from pyopenshowvar.krl.datfile import MAX_ELEMENTS
 
-from .datfile import MAX_ELEMENTS
 from .values import Range, Refused, member_specs
 
 __all__ = ["Var", "VarPath", "parse_name"]

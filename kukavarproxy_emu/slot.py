@@ -29,7 +29,7 @@ __all__ = ["Slot"]
 
 
 class Slot:
-    """``store.slot(name)``: the part ``name`` of a declared variable (not a whole array, not
+    """``Slot.compile(store, name)``: the part ``name`` of a declared variable (not a whole array, not
     a character of a text)."""
 
     __slots__ = ("chain", "declared", "index", "members", "name", "store", "type_name", "var")
@@ -37,7 +37,7 @@ class Slot:
     def __init__(self, store: VariableStore, var: Var, index: int, members: tuple[str, ...]):
         self.store, self.var, self.index, self.members = store, var, index, members
         #: The store's declarations (``declared.get(var.name) is var``: still current).
-        self.declared = store._vars
+        self.declared = store.declared
         self.chain = var.chain(store.registry, members)
         self.type_name = self.chain[-1][1]
         self.name = var.name + "".join(f".{m}" for m in members)
@@ -63,8 +63,7 @@ class Slot:
     def get(self) -> KrlValue | None:
         """The value, None when it is not initialised."""
         store, base = self.store, self.var.name
-        if store._stale and base in store._stale:  # a lazy reading: fill it first
-            store._refresh(base)
+        store.fill_stale(base)  # a lazy reading: fill it first
         value: KrlValue | None = self.var.elems[self.index]
         for member in self.members:
             value = value._members.get(member) if isinstance(value, Struct) else None
@@ -80,4 +79,4 @@ class Slot:
         new = rebuild(var.elems[self.index], self.chain, self.members, value)
         check_ranges(var.ranges, var.name, new)
         var.elems[self.index] = new
-        self.store._changed(var, self.index)
+        self.store.changed(var, self.index)

@@ -36,11 +36,11 @@ from pyopenshowvar.krl import (
     TypeSpec,
     format_krc4,
 )
+from pyopenshowvar.krl.datfile import DatFile, parse_dat
+from pyopenshowvar.sysvars import system_variables
 
-from .datfile import DatFile, load_default_config, parse_dat
+from .default_config import load_default_config
 from .names import Var, VarPath, parse_name
-from .slot import Slot
-from .sysvars import system_variables
 from .values import CHAR_LEN, Range, Refused, check, check_ranges, coerce, parse_text, rebuild
 
 __all__ = ["Range", "UnknownVariable", "VariableStore", "WriteRefused"]
@@ -400,7 +400,7 @@ class VariableStore:
                 continue
             var.elems[i] = value
             ok = True
-        self._changed(var, None)
+        self.changed(var, None)
         return ok and len(words) <= len(var.elems)
 
     def write(self, name: str, text: str) -> str:
@@ -451,7 +451,7 @@ class VariableStore:
                 var.elems = cast("list[KrlValue | None]", list(value))
             else:
                 var.elems[0] = cast("KrlValue", value)
-            self._changed(var, None)
+            self.changed(var, None)
             return
         reg = self.registry
         if var.is_array and not path.index and not path.members:  # whole array: a list
@@ -466,7 +466,7 @@ class VariableStore:
             except Refused as exc:
                 raise WriteRefused(name, str(exc)) from None
             var.elems = elems
-            self._changed(var, None)
+            self.changed(var, None)
             return
 
         def produce(spec: TypeSpec, type_name: str) -> KrlValue:
@@ -475,11 +475,6 @@ class VariableStore:
             return coerced
 
         self._assign(name, produce, bypass_read_only=True)
-
-    def slot(self, name: str) -> Slot | None:
-        """``name`` compiled for repeated access (:class:`~.slot.Slot`); None for what a slot
-        does not cover (see :meth:`Slot.compile`)."""
-        return Slot.compile(self, name)
 
     def put_valid(self, name: str, value: KrlValue) -> None:
         """Set ``name`` (any path) to ``value``, which is a valid value of its declared type
@@ -513,6 +508,17 @@ class VariableStore:
         for name in group:
             stale[name] = entry
             self._bump(name)  # its value changes when it is filled
+
+    @property
+    def declared(self) -> Mapping[str, Var]:
+        """The declarations by base name (the store's own mapping, not a copy: a compiled
+        :class:`~.slot.Slot` checks ``declared.get(name) is var`` to know it is current)."""
+        return self._vars
+
+    def fill_stale(self, base: str) -> None:
+        """Fill the lazy value ``base`` if it is stale (see :meth:`defer`); else nothing."""
+        if self._stale and base in self._stale:
+            self._refresh(base)
 
     def _refresh(self, base: str | None = None) -> None:
         """Fill the group of ``base`` (None: every stale group)."""
@@ -614,7 +620,7 @@ class VariableStore:
             raise WriteRefused(name, str(exc)) from None
         # The new value is complete: swapping it in is the only mutation.
         var.elems[slot] = new_elem
-        self._changed(var, slot)
+        self.changed(var, slot)
 
     def _bump(self, base: str) -> None:
         self.mutations += 1
@@ -625,7 +631,7 @@ class VariableStore:
         equal value."""
         return self._versions.get(base, 0)
 
-    def _changed(self, var: Var, slot: int | None) -> None:
+    def changed(self, var: Var, slot: int | None) -> None:
         """Drop the cached texts of ``var``. A changed element of an array that is read whole
         gets its text at once: one format per write, so a whole-array read never has to
         format hundreds of elements in one go (512 E6AXIS: ~10 ms)."""

@@ -35,9 +35,9 @@ import pytest_asyncio
 from pyopenshowvar.protocol import HEADER_SIZE, Reply, decode_reply
 
 from .config import EmulatorConfig
+from .emulator_thread import EmulatorThread
 from .server import Emulator
 from .store import VariableStore
-from .threaded import EmulatorThread
 
 __all__ = [
     "IDEAL_CONFIG",

@@ -32,8 +32,7 @@ from pyopenshowvar.krl import (
     TypeSpec,
     parse_value,
 )
-
-from .sysvars import INT_MAX, INT_MIN
+from pyopenshowvar.sysvars import INT_MAX, INT_MIN
 
 __all__ = [
     "CHAR_LEN",

@@ -135,12 +135,6 @@ class Connection(LinkBase[_Fut]):
     async def write(self, name: str, value: str, *, timeout: float | None = None) -> Reply:
         return await self._request(name, encode_write(0, name, value), timeout)
 
-    async def request_frame(
-        self, name: str, build: _Builder, *, timeout: float | None = None
-    ) -> Reply:
-        """Send a frame made by ``build(msg_id)`` (used for modes 2/3 and tests)."""
-        return await self._request(name, build(0), timeout)
-
     # One watchdog timer per connection, not one timer per request: requests carry their
     # deadline and the watchdog, armed for the earliest one, fails those overdue when it fires
     # (in the serial case it is re-armed once per timeout period, not once per request).

@@ -31,6 +31,7 @@ from typing import Any
 from .core import Op
 from .errors import KrlValueError, UnknownVariableError, VariableError
 from .krl import BUILTIN_TYPES, KrlValue, Struct, TypeRegistry, parse_value
+from .snapshot_krl import dat_text, sub_text
 from .snapshot_layout import (
     COUNTER,
     KRL_KEYWORDS,
@@ -115,14 +116,10 @@ class Snapshot:
 
     def krl_dat(self) -> str:
         """The ``$CONFIG.DAT`` declarations (a data list the emulator loads with ``--config``)."""
-        from .snapshot_krl import dat_text
-
         return dat_text(self)
 
     def krl_sub(self) -> str:
         """The SPS that copies the variables each pass (``--sps`` of the emulator)."""
-        from .snapshot_krl import sub_text
-
         return sub_text(self)
 
     def write_krl(self, directory: str | Path) -> tuple[Path, Path]:

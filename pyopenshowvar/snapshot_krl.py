@@ -14,17 +14,32 @@ Both are pure functions of the snapshot's layout; docs/snapshots.md explains ins
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Sequence
+from typing import Protocol
 
-if TYPE_CHECKING:
-    from .snapshot import Snapshot
+from .snapshot_layout import Part, struc_line
 
-__all__ = ["dat_text", "sub_text"]
+__all__ = ["Layout", "dat_text", "sub_text"]
+
+
+class Layout(Protocol):
+    """What the text needs of a snapshot (a :class:`~pyopenshowvar.snapshot.Snapshot` is one):
+    its name, its variables, its parts and the globals the PC reads."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def variables(self) -> Sequence[object]: ...
+    @property
+    def parts(self) -> Sequence[Part]: ...
+    @property
+    def read_names(self) -> tuple[str, ...]: ...
+
 
 _INT_MAX = 2**31 - 1
 
 
-def _header(snapshot: Snapshot) -> list[str]:
+def _header(snapshot: Layout) -> list[str]:
     n = len(snapshot.variables)
     parts = snapshot.read_names
     read = (
@@ -40,10 +55,8 @@ def _header(snapshot: Snapshot) -> list[str]:
     ]
 
 
-def dat_text(snapshot: Snapshot) -> str:
+def dat_text(snapshot: Layout) -> str:
     """The data list of ``snapshot``: types, globals and a comment line per copied variable."""
-    from .snapshot_layout import struc_line
-
     name = snapshot.name
     lines = [
         "&ACCESS RVP",
@@ -63,7 +76,7 @@ def dat_text(snapshot: Snapshot) -> str:
     return "\n".join(lines)
 
 
-def copy_fold(snapshot: Snapshot, indent: str = "    ") -> list[str]:
+def copy_fold(snapshot: Layout, indent: str = "    ") -> list[str]:
     """The statements of one SPS pass, in a ``;FOLD`` (what goes into ``USER PLC``)."""
     lines = [f";FOLD SNAPSHOT {snapshot.name}: copy one pass (pyopenshowvar)"]
     for part in snapshot.parts:
@@ -83,7 +96,7 @@ def copy_fold(snapshot: Snapshot, indent: str = "    ") -> list[str]:
     return [indent + line for line in lines]
 
 
-def sub_text(snapshot: Snapshot) -> str:
+def sub_text(snapshot: Layout) -> str:
     """A submit program running the copy fold once per pass of its ``LOOP``."""
     name = snapshot.name
     lines = [

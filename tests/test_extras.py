@@ -13,7 +13,7 @@ import textwrap
 
 import pytest
 
-from kukavarproxy_emu.threaded import EmulatorThread
+from kukavarproxy_emu.emulator_thread import EmulatorThread
 from pyopenshowvar.extras import EXTRA_OF, MissingExtraError, explain, require
 
 #: Run before the snippet: refuse ``blocked`` modules as if they were not installed.

@@ -31,8 +31,8 @@ from pyopenshowvar_apps.casestudies.haptic_model import (
 )
 
 from kukavarproxy_emu import Obstacle
-from kukavarproxy_emu.motion import Robot
 from kukavarproxy_emu.plant.params import make_bodies
+from kukavarproxy_emu.robot_task import Robot
 from kukavarproxy_emu.store import VariableStore
 from pyopenshowvar import Client
 from pyopenshowvar.kinematics import KR6R900SIXX as KR6

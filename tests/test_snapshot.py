@@ -16,9 +16,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from kukavarproxy_emu.datfile import parse_dat
 from kukavarproxy_emu.store import VariableStore
-from kukavarproxy_emu.sysvars import SYSTEM_VARIABLES
 from pyopenshowvar import (
     E6Axis,
     KrlEnum,
@@ -31,8 +29,10 @@ from pyopenshowvar import (
 )
 from pyopenshowvar.core import ReadResult
 from pyopenshowvar.krl import BUILTIN_TYPES, Kind, TypeRegistry
+from pyopenshowvar.krl.datfile import parse_dat
 from pyopenshowvar.krl.systypes import SYSTEM_TYPES
 from pyopenshowvar.snapshot import KRL_KEYWORDS, read_snapshot, struc_line
+from pyopenshowvar.sysvars import SYSTEM_VARIABLES
 
 _NAME = re.compile(r"[A-Z_][A-Z0-9_]*")
 

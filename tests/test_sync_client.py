@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 import pyopenshowvar
+from kukavarproxy_emu.emulator_thread import EmulatorThread
 from kukavarproxy_emu.testing import TEST_CONFIG
-from kukavarproxy_emu.threaded import EmulatorThread
 from pyopenshowvar import (
     E6Axis,
     KvpConnectionError,

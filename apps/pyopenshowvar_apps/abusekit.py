@@ -26,8 +26,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any, Self
 
-from kukavarproxy_emu.abuse import AbuseTally, EmulatorProcess
-from kukavarproxy_emu.abuse_modes import PeakRss
+from kukavarproxy_emu.abuse import AbuseTally, EmulatorProcess, PeakRss
 
 __all__ = ["AppProcess", "AttackTally", "ChildProbe", "PeakMemory", "run_child_probe"]
 

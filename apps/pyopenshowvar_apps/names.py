@@ -116,7 +116,7 @@ def store_names(store: Any) -> Names:
 
 def dat_names(paths: Iterable[Path]) -> Names:
     """Global names declared in ``$CONFIG.DAT``-style files (1-D arrays as ``NAME[]``)."""
-    from kukavarproxy_emu.datfile import parse_dat
+    from pyopenshowvar.krl.datfile import parse_dat
 
     notes: dict[str, str] = {}
     for path in paths:

@@ -164,7 +164,7 @@ def _known_type(type_name: str) -> bool:
 
 
 def _system_variable(name: str) -> Any:
-    from kukavarproxy_emu.sysvars import SYSTEM_VARIABLES
+    from pyopenshowvar.sysvars import SYSTEM_VARIABLES
     from pyopenshowvar_apps.names import base_name
 
     base = base_name(name)

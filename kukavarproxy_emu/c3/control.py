@@ -48,7 +48,7 @@ from ..slices import Checkpoint, run_sliced
 from .vfs import VfsError, VirtualFS
 
 if TYPE_CHECKING:
-    from ..motion import Robot
+    from ..robot_task import Robot
     from ..store import VariableStore
 
 __all__ = ["MAX_MODULE", "RobotControl"]

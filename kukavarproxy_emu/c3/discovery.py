@@ -13,7 +13,7 @@ import asyncio
 import logging
 from collections.abc import Callable
 
-from ..discovery import DiscoveryProtocol
+from ..kvp_discovery import DiscoveryProtocol
 
 __all__ = ["C3DiscoveryProtocol", "start_c3_discovery"]
 

@@ -1,7 +1,7 @@
 """KRL interpreter front end: lexer, AST and parser for the KRL subset KVP programs use.
 
 ``parse_src(text, filename)`` turns a ``.src``/``.sub`` module into an :class:`ast.Module`;
-``parse_dat`` parses a module data list with the shared :mod:`kukavarproxy_emu.datfile`
+``parse_dat`` parses a module data list with the shared :mod:`pyopenshowvar.krl.datfile`
 parser; ``read_src(path)`` reads a module and its ``.dat`` beside it. Every syntax error is a
 :class:`KrlSyntaxError` whose message reads ``file:line:column: message`` plus the offending
 line and a caret.

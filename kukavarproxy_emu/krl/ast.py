@@ -13,7 +13,7 @@ Conventions the executor can rely on:
   ``"*" "/" "+" "-" ":" "==" "<>" "<" "<=" ">" ">=" "AND" "OR" "EXOR" "B_AND" "B_OR"
   "B_EXOR"`` (binary);
 * bit literals (``'B1010'``, ``'H1F'``) are plain :class:`IntLit`;
-* declarations are the :mod:`kukavarproxy_emu.datfile` records (one declaration parser for
+* declarations are the :mod:`pyopenshowvar.krl.datfile` records (one declaration parser for
   ``$CONFIG.DAT``, module ``.dat`` files and ``DECL`` lines inside a ``DEF``): initial values
   stay KRL literal text for :func:`pyopenshowvar.krl.parse_value`.
 """
@@ -23,7 +23,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TypeAlias
 
-from ..datfile import DatFile, Declaration, EnumDecl, StrucDecl
+from pyopenshowvar.krl.datfile import DatFile, Declaration, EnumDecl, StrucDecl
+
 from .ast_expr import (
     Aggregate,
     AggregateItem,

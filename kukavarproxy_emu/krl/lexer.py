@@ -15,7 +15,7 @@ import re
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from ..datfile import DatSyntaxError
+from pyopenshowvar.krl.datfile import DatSyntaxError
 
 __all__ = ["KrlSyntaxError", "Token", "tokenize"]
 

@@ -4,7 +4,7 @@ Statements are line-based (one per line, blank/comment lines skipped); expressio
 :class:`~kukavarproxy_emu.krl.parser_expr.ExprParser` and motions from
 :mod:`~kukavarproxy_emu.krl.parser_motion`. Declaration lines (``DECL``, implicit
 ``INT I``, ``STRUC``, ``ENUM``) are handed, line by line, to the one declaration parser of
-:mod:`kukavarproxy_emu.datfile`, so ``$CONFIG.DAT``, module ``.dat`` files and ``DEF`` bodies
+:mod:`pyopenshowvar.krl.datfile`, so ``$CONFIG.DAT``, module ``.dat`` files and ``DEF`` bodies
 accept exactly the same declaration syntax.
 """
 
@@ -13,7 +13,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-from .. import datfile
+from pyopenshowvar.krl import datfile
+
 from . import ast
 from .lexer import KrlSyntaxError, tokenize
 from .parser_expr import MAX_NESTING
@@ -344,7 +345,7 @@ def parse_src(
 def parse_dat(
     text: str, filename: str = "<dat>", *, checkpoint: Callable[[], None] | None = None
 ) -> datfile.DatFile:
-    """Parse a module ``.dat`` data list with the shared :mod:`kukavarproxy_emu.datfile`
+    """Parse a module ``.dat`` data list with the shared :mod:`pyopenshowvar.krl.datfile`
     parser, reporting errors as :class:`KrlSyntaxError` (with the caret) like ``.src`` files."""
     try:
         return datfile.parse_dat(text, filename, checkpoint=checkpoint)

@@ -31,7 +31,7 @@ from ..store import UnknownVariable, VariableStore, WriteRefused
 from . import ast
 
 if TYPE_CHECKING:
-    from ..datfile import Declaration
+    from pyopenshowvar.krl.datfile import Declaration
 
 __all__ = [
     "ACTUAL_POSITION",

@@ -360,12 +360,6 @@ class MotionKernel(Publisher):
         """Plan ``LIN pose [C_DIS]``: a straight TCP line in $BASE at ``$VEL.CP``."""
         self.plan_lin(pose, approx=approx, label=label).run()
 
-    def lin_rel(
-        self, increment: object, *, approx: bool = False, tool: bool = False, label: str = "LIN_REL"
-    ) -> None:
-        """``LIN_REL`` by a Cartesian increment from the previous planned end point."""
-        self.lin(self.rel_pose(increment, tool=tool), approx=approx, label=label)
-
     def plan_lin(self, pose: object, *, approx: bool = False, label: str = "LIN") -> PlanJob:
         """``LIN pose`` as a :class:`PlanJob`: the target and $TOOL/$BASE/$VEL/$ACC/$APO are
         read now; the joint path and its timing are computed by the job's slices."""

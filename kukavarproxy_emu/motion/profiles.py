@@ -88,16 +88,6 @@ class Trapezoid:
             return self.v
         return self.a * (self.duration - t)
 
-    def dds(self, t: float) -> float:
-        """Acceleration of ``s`` at time ``t`` (piecewise constant)."""
-        if self.duration <= 0.0 or t <= 0.0 or t >= self.duration:
-            return 0.0
-        if t < self.t_acc:
-            return self.a
-        if t <= self.duration - self.t_acc:
-            return 0.0
-        return -self.a
-
     def time_at_remaining(self, remaining: float) -> float:
         """The time at which ``1 - s`` falls to ``remaining`` (0..1): where blending may start."""
         if remaining <= 0.0 or self.duration <= 0.0:

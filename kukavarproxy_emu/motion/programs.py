@@ -1,25 +1,18 @@
-"""Robot programs the simulated controller runs: the :class:`Program` interface and its makers.
+"""The interface of a robot program the simulated controller runs: :class:`Program`, :class:`Idle`.
 
-The thesis programs are KRL files shipped in ``kukavarproxy_emu/programs/`` (``follow.src``,
-``actuator.src``, ``ext_move_axis.src``, ``joint_path.src``, ``cart_path.src`` and the SPS
-``sps.sub``), run by the KRL interpreter (:mod:`kukavarproxy_emu.krl.executor`); the former
-Python re-implementations are gone. ``--program NAME`` picks a shipped file, ``--program
-PATH.src`` a user's own. A program's :meth:`Program.step` runs once per IPO cycle, before the
-kernel advances; it only plans motions and reads/writes variables, and a
-:class:`~.kernel.MotionRefused` raised there stops it (the robot task reports it).
+The programs themselves are KRL files run by the KRL interpreter
+(:mod:`kukavarproxy_emu.krl.executor`), which implements this interface; which one runs is
+chosen by :mod:`kukavarproxy_emu.program_factory`, above both. A program's
+:meth:`Program.step` runs once per IPO cycle, before the kernel advances; it only plans
+motions and reads/writes variables, and a :class:`~.kernel.MotionRefused` raised there stops
+it (the robot task reports it).
 """
 
 from __future__ import annotations
 
-from pathlib import Path
-from typing import TYPE_CHECKING
-
 from .kernel import MotionKernel
 
-if TYPE_CHECKING:
-    from ..store import VariableStore
-
-__all__ = ["PROGRAMS", "Idle", "Program", "make_program"]
+__all__ = ["Idle", "Program"]
 
 
 class Program:
@@ -37,31 +30,3 @@ class Program:
 
 class Idle(Program):
     """``--program none``: no robot program selected (``$PRO_STATE1`` = ``#P_FREE``)."""
-
-
-#: ``--program NAME`` → the shipped KRL file it runs ("" = no program).
-PROGRAMS: dict[str, str] = {
-    "follow": "follow.src",
-    "actuator": "actuator.src",
-    "ext_move_axis": "ext_move_axis.src",
-    "joint_path": "joint_path.src",
-    "cart_path": "cart_path.src",
-    "none": "",
-}
-
-
-def make_program(program: str | Path, store: VariableStore) -> Program:
-    """The program for ``--program``: a shipped name, ``none``, or a ``.src`` path.
-
-    The KRL source is parsed (and its ``.dat`` declared into ``store``) here, so a syntax
-    error (``KrlSyntaxError``, a ``ValueError``) or a missing file (``OSError``) is raised when
-    the robot is built, i.e. at emulator start.
-    """
-    if program == "none":
-        return Idle()
-    from ..krl.executor import KrlProgram, load_module  # the interpreter imports this module
-
-    if isinstance(program, str) and program not in PROGRAMS and "." not in Path(program).name:
-        known = ", ".join(PROGRAMS)
-        raise ValueError(f"unknown program {program!r} (known: {known}, or a .src file)")
-    return KrlProgram(load_module(program), store)

@@ -28,7 +28,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from .params import Bodies, FloatArray, PlantParams
+from .frames import FloatArray
+from .params import Bodies, PlantParams
 
 __all__ = ["Drives", "friction"]
 

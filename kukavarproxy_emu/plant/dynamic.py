@@ -42,8 +42,9 @@ from pyopenshowvar.krl import Struct
 from ..store import VariableStore
 from .contact import Obstacle, contact_force
 from .drives import Drives
-from .mjcf import Payload, build_mjcf, frame_matrix, payload_of
-from .params import Bodies, FloatArray, PlantParams, load_params, with_calibration_error
+from .frames import FloatArray, frame_matrix
+from .mjcf import Payload, build_mjcf, payload_of
+from .params import Bodies, PlantParams, load_params, with_calibration_error
 from .sensors import MOTION_VARIABLES, Sensors
 
 __all__ = ["MOTION_VARIABLES", "DynamicPlant", "StepRecord", "Truth"]

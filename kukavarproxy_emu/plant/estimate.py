@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .params import FloatArray, dh_matrix
+from .frames import FloatArray, dh_matrix
 
 if TYPE_CHECKING:
     from pyopenshowvar.arms import Arm

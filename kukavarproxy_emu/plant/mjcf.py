@@ -21,9 +21,10 @@ import numpy as np
 
 from pyopenshowvar.krl import Struct
 
-from .params import Bodies, FloatArray, dh_matrix
+from .frames import FloatArray, dh_matrix, frame_matrix
+from .params import Bodies
 
-__all__ = ["GRAVITY", "Payload", "build_mjcf", "frame_matrix", "payload_of"]
+__all__ = ["GRAVITY", "Payload", "build_mjcf", "payload_of"]
 
 #: Standard gravity, m/s².
 GRAVITY = 9.81
@@ -60,20 +61,6 @@ def payload_of(value: object) -> Payload | None:
         tuple(max(_num(j.get(k)), 0.0) for k in "XYZ") if isinstance(j, Struct) else (0.0,) * 3
     )
     return Payload(mass, frame, moments)  # type: ignore[arg-type]
-
-
-def frame_matrix(xyzabc: FloatArray | tuple[float, ...]) -> FloatArray:
-    """KUKA FRAME (mm, deg; R = Rz(A)·Ry(B)·Rx(C)) as a 4×4 transform."""
-    x, y, z, a, b, c = (float(v) for v in xyzabc)
-    ca, sa = math.cos(math.radians(a)), math.sin(math.radians(a))
-    cb, sb = math.cos(math.radians(b)), math.sin(math.radians(b))
-    cc, sc = math.cos(math.radians(c)), math.sin(math.radians(c))
-    return np.array(
-        [[ca * cb, ca * sb * sc - sa * cc, ca * sb * cc + sa * sc, x],
-         [sa * cb, sa * sb * sc + ca * cc, sa * sb * cc - ca * sc, y],
-         [-sb, cb * sc, cb * cc, z],
-         [0.0, 0.0, 0.0, 1.0]]
-    )  # fmt: skip
 
 
 def _quat(rot: FloatArray) -> str:

@@ -18,21 +18,20 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
+
+from .frames import FloatArray, dh_matrix, frame_matrix
 
 __all__ = [
     "DEFAULT_PARAMS_FILE",
     "Bodies",
     "Calibration",
     "PlantParams",
-    "dh_matrix",
     "load_params",
     "make_bodies",
     "params_of",
     "with_calibration_error",
 ]
 
-FloatArray = npt.NDArray[np.float64]
 DEFAULT_PARAMS_FILE = Path(__file__).with_name("kr6r900sixx_dynamics.toml")
 _LINK_KEYS = (
     "dh", "sign", "origin", "mass", "com", "inertia", "rotor", "gear", "coulomb", "static",
@@ -50,16 +49,6 @@ class Calibration:
     com_mm: float
     inertia_fraction: float
     friction_fraction: float
-
-
-def dh_matrix(a: float, alpha: float, d: float, theta: float) -> FloatArray:
-    """Standard D-H link transform ``Rz(θ)·Tz(d)·Tx(a)·Rx(α)`` (mm, degrees)."""
-    ct, st = np.cos(np.radians(theta)), np.sin(np.radians(theta))
-    ca, sa = np.cos(np.radians(alpha)), np.sin(np.radians(alpha))
-    return np.array(
-        [[ct, -st * ca, st * sa, a * ct], [st, ct * ca, -ct * sa, a * st], [0.0, sa, ca, d],
-         [0.0, 0.0, 0.0, 1.0]]
-    )  # fmt: skip
 
 
 @dataclass(frozen=True, eq=False)
@@ -178,8 +167,6 @@ class PlantParams:
 
 
 def _frame(xyzabc: list[float]) -> FloatArray:
-    from .mjcf import frame_matrix  # mjcf imports this module
-
     return frame_matrix(tuple(float(v) for v in xyzabc))
 
 

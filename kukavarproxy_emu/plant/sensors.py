@@ -20,8 +20,7 @@ from pyopenshowvar.kinematics.single import SinglePoseFK
 from pyopenshowvar.krl import E6Axis, E6Pos
 
 from ..store import VariableStore
-from .mjcf import frame_matrix
-from .params import FloatArray
+from .frames import FloatArray, frame_matrix
 
 __all__ = ["MOTION_VARIABLES", "NOISE_BLOCK", "Sensors"]
 

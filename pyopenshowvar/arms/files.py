@@ -161,6 +161,42 @@ def arm_from_dict(data: Mapping[str, Any], file: str = "<arm>", key: str = "") -
     name = ctx.text(data, "name", "")
     if not name:
         raise ctx.fail("", "missing 'name'")
+    lu, au = _units(ctx, data)
+    conv = ctx.text(data, "convention", "")
+    if conv not in ("standard", "modified", "chain"):
+        raise ctx.fail("", f"convention must be 'standard', 'modified' or 'chain', got {conv!r}")
+    rows = data.get("joint")
+    if not isinstance(rows, list) or not rows or not all(isinstance(r, dict) for r in rows):
+        raise ctx.fail("", "needs [[joint]] tables, base outwards")
+    specs, dh_rows, inertials, chain = _joint_rows(ctx, rows, conv, lu, au)
+    if conv == "chain":
+        tail = np.eye(4)
+        links = inertials
+    else:
+        chain, tail, links = dh_chain(dh_rows, conv, inertials)  # type: ignore[arg-type]
+    joints = []
+    for spec, (org, axis), inertial in zip(specs, chain, links, strict=True):
+        where = spec.pop("where")
+        try:
+            joints.append(Joint(origin=org, axis=axis, inertial=inertial, **spec))
+        except ValueError as exc:
+            raise ctx.fail(where, str(exc)) from exc
+    home = None
+    if "home" in data:
+        scale = np.where([s["type"] == "revolute" for s in specs], au, lu)
+        home = ctx.vec(data, "home", len(joints), "") * scale
+    flange = tail @ _frame(ctx, data, "flange", lu, au)
+    base_in = _inertial(ctx, ctx.table(data, "base_inertial", ""), "base_inertial", lu, au)
+    try:
+        arm = Arm(name, tuple(joints), _frame(ctx, data, "base", lu, au), flange, home,
+                  base_in, **meta)  # fmt: skip
+    except ValueError as exc:
+        raise ctx.fail("", str(exc)) from exc
+    return _closed_form(ctx, data, arm)
+
+
+def _units(ctx: _Ctx, data: Mapping[str, Any]) -> tuple[float, float]:
+    """The file's length and angle units as factors to mm and degrees."""
     lu_name = ctx.text(data, "length_unit", "", "mm")
     au_name = ctx.text(data, "angle_unit", "", "deg")
     if lu_name not in _LENGTH:
@@ -168,12 +204,19 @@ def arm_from_dict(data: Mapping[str, Any], file: str = "<arm>", key: str = "") -
     if au_name not in _ANGLE:
         raise ctx.fail("", f"angle_unit must be 'deg' or 'rad', got {au_name!r}")
     lu, au = _LENGTH[lu_name], _ANGLE[au_name]
-    conv = ctx.text(data, "convention", "")
-    if conv not in ("standard", "modified", "chain"):
-        raise ctx.fail("", f"convention must be 'standard', 'modified' or 'chain', got {conv!r}")
-    rows = data.get("joint")
-    if not isinstance(rows, list) or not rows or not all(isinstance(r, dict) for r in rows):
-        raise ctx.fail("", "needs [[joint]] tables, base outwards")
+    return lu, au
+
+
+def _joint_rows(
+    ctx: _Ctx, rows: list[dict[str, Any]], conv: str, lu: float, au: float
+) -> tuple[
+    list[dict[str, Any]],
+    list[DHRow],
+    list[Inertial | None],
+    list[tuple[FloatArray, FloatArray]],
+]:
+    """The ``[[joint]]`` tables checked: per moving joint its :class:`Joint` arguments
+    (``where`` added), per row its D-H row or (``chain``) its origin and axis, its inertial."""
     allowed = _JOINT_COMMON | (_JOINT_CHAIN if conv == "chain" else _JOINT_DH)
     specs: list[dict[str, Any]] = []
     dh_rows: list[DHRow] = []
@@ -224,29 +267,11 @@ def arm_from_dict(data: Mapping[str, Any], file: str = "<arm>", key: str = "") -
             "where": where,
         }
         specs.append(spec)
-    if conv == "chain":
-        tail = np.eye(4)
-        links = inertials
-    else:
-        chain, tail, links = dh_chain(dh_rows, conv, inertials)  # type: ignore[arg-type]
-    joints = []
-    for spec, (org, axis), inertial in zip(specs, chain, links, strict=True):
-        where = spec.pop("where")
-        try:
-            joints.append(Joint(origin=org, axis=axis, inertial=inertial, **spec))
-        except ValueError as exc:
-            raise ctx.fail(where, str(exc)) from exc
-    home = None
-    if "home" in data:
-        scale = np.where([s["type"] == "revolute" for s in specs], au, lu)
-        home = ctx.vec(data, "home", len(joints), "") * scale
-    flange = tail @ _frame(ctx, data, "flange", lu, au)
-    base_in = _inertial(ctx, ctx.table(data, "base_inertial", ""), "base_inertial", lu, au)
-    try:
-        arm = Arm(name, tuple(joints), _frame(ctx, data, "base", lu, au), flange, home,
-                  base_in, **meta)  # fmt: skip
-    except ValueError as exc:
-        raise ctx.fail("", str(exc)) from exc
+    return specs, dh_rows, inertials, chain
+
+
+def _closed_form(ctx: _Ctx, data: Mapping[str, Any], arm: Arm) -> Arm:
+    """``arm`` with its closed-form model unless ``closed_form = false``; ``true`` demands one."""
     want = data.get("closed_form", None)
     if want is not None and not isinstance(want, bool):
         raise ctx.fail("", f"'closed_form' must be true or false, got {want!r}")

@@ -30,17 +30,19 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal, Protocol
 
 import numpy as np
 import numpy.typing as npt
 
 from ..kinematics.errors import UnreachableError
 from ..kinematics.frames import FloatArray, as_transform, inv_transform, pose_to_matrix
-from .model import Arm
 from .spatial import rotation_log
 
-__all__ = ["IKResult", "solve"]
+if TYPE_CHECKING:
+    from ..kinematics.model import RobotModel
+
+__all__ = ["Chain", "IKResult", "solve"]
 
 #: The damping λ = k·½‖e‖² + λ₀ (e in metres and radians): Sugihara's form with k = 0.1,
 #: which halved the steps to convergence on the catalogue arms compared with k = 1.
@@ -52,6 +54,34 @@ POOL = 128
 #: Redundancy resolution towards ``preferred``: null-space steps and gain per step (0..1).
 NULL_STEPS = 30
 NULL_GAIN = 0.2
+
+
+class Chain(Protocol):
+    """What the solver needs of an arm (a :class:`~pyopenshowvar.arms.Arm` is one): its
+    limits and home, its flange, the closed-form model where one applies, and the batched
+    link frames and joint axes the numeric steps are built from."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def dof(self) -> int: ...
+    @property
+    def home(self) -> FloatArray | None: ...
+    @property
+    def flange(self) -> FloatArray: ...
+    @property
+    def kuka(self) -> RobotModel | None: ...
+    @property
+    def revolute(self) -> npt.NDArray[np.bool_]: ...
+    @property
+    def lower(self) -> FloatArray: ...
+    @property
+    def upper(self) -> FloatArray: ...
+    @property
+    def _all_revolute(self) -> bool: ...
+    def fk(self, q: npt.ArrayLike, tool: npt.ArrayLike | None = None) -> FloatArray: ...
+    def _chain(self, a: FloatArray, b: FloatArray) -> FloatArray: ...
+    def _world_axes(self, frames: FloatArray) -> FloatArray: ...
 
 
 @dataclass(frozen=True)
@@ -115,7 +145,7 @@ def _targets(target: npt.ArrayLike) -> tuple[FloatArray, bool]:
 
 
 def solve(
-    arm: Arm,
+    arm: Chain,
     target: npt.ArrayLike,
     seed: npt.ArrayLike | None = None,
     *,
@@ -184,7 +214,7 @@ def solve(
 
 
 def _closed(
-    arm: Arm, flat: FloatArray, near: FloatArray, tool_m: FloatArray | None
+    arm: Chain, flat: FloatArray, near: FloatArray, tool_m: FloatArray | None
 ) -> tuple[FloatArray, npt.NDArray[np.bool_]]:
     from ..kinematics.inverse import inverse
 
@@ -269,7 +299,7 @@ class _Batch:
 
 
 def _numeric(
-    arm: Arm,
+    arm: Chain,
     flat: FloatArray,
     pos_only: bool,
     seeds: FloatArray,
@@ -346,7 +376,7 @@ def _numeric(
 
 
 def _towards(
-    arm: Arm,
+    arm: Chain,
     q: FloatArray,
     flat: FloatArray,
     pref: FloatArray,
@@ -378,7 +408,7 @@ def _towards(
 
 
 def _task(
-    arm: Arm, q: FloatArray, flat: FloatArray, pos_only: bool, eff: FloatArray
+    arm: Chain, q: FloatArray, flat: FloatArray, pos_only: bool, eff: FloatArray
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """At configurations ``q`` (internal units) for targets ``flat``: the task error
     (position m, then the skew part of R_target·R_tcpᵀ), the transposed geometric Jacobian

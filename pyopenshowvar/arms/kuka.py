@@ -97,16 +97,11 @@ def _rate(v: float) -> float:
     return v if math.isfinite(v) else UNKNOWN_RATE
 
 
-def derive_robot_model(arm: Arm, *, samples: int = 64, tol_mm: float = 1e-8) -> RobotModel | None:
-    """The closed-form model of a KUKA-layout 6R arm, or None if the arm is not one."""
-    if arm.dof != 6 or not all(arm.revolute):
-        return None
-    if not np.allclose(arm.base, np.eye(4)):
-        return None  # the closed form's frame 0 is $ROBROOT = the chain's base frame
-    frames = arm.link_frames(np.zeros(6))
+def _kuka_dh(arm: Arm, frames: FloatArray, flange: FloatArray) -> FloatArray | None:
+    """The KUKA D-H table (a, α, d, θ, sign per axis) of an arm whose link ``frames`` and
+    ``flange`` at the zero pose have the KUKA layout; None when they do not."""
     w = np.einsum("kij,kj->ki", frames[:, :3, :3], np.stack([j.axis for j in arm.joints]))
     o = frames[:, :3, 3] - arm.base[:3, 3]
-    flange = arm.fk(np.zeros(6))
     dots = np.einsum("ki,ki->k", w, _KUKA_AXES)
     eps = 1e-9 * max(1.0, float(np.max(np.abs(o))))
     if np.any(np.abs(np.abs(dots) - 1.0) > 1e-9):
@@ -140,12 +135,32 @@ def derive_robot_model(arm: Arm, *, samples: int = 64, tol_mm: float = 1e-8) -> 
             [0.0, _ALPHA[5], d6, _THETA[5], signs[5]],
         ]
     )
+    return dh
+
+
+def _link_masses(arm: Arm, frames: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Link masses and centres of mass (base frame, zero pose) of the arm's joints."""
     masses = np.zeros(6)
     coms = np.zeros((6, 3))
     for i, j in enumerate(arm.joints):
         if j.inertial is not None:
             masses[i] = j.inertial.mass
             coms[i] = frames[i, :3, :3] @ j.inertial.com + frames[i, :3, 3]
+    return masses, coms
+
+
+def derive_robot_model(arm: Arm, *, samples: int = 64, tol_mm: float = 1e-8) -> RobotModel | None:
+    """The closed-form model of a KUKA-layout 6R arm, or None if the arm is not one."""
+    if arm.dof != 6 or not all(arm.revolute):
+        return None
+    if not np.allclose(arm.base, np.eye(4)):
+        return None  # the closed form's frame 0 is $ROBROOT = the chain's base frame
+    frames = arm.link_frames(np.zeros(6))
+    flange = arm.fk(np.zeros(6))
+    dh = _kuka_dh(arm, frames, flange)
+    if dh is None:
+        return None
+    masses, coms = _link_masses(arm, frames)
     probe = RobotModel(
         name=arm.name,
         dh=dh,

@@ -24,10 +24,10 @@ import numpy as np
 import numpy.typing as npt
 
 from ..kinematics.frames import FloatArray, as_transform, matrix_to_frame
+from .ik import IKResult, solve
 
 if TYPE_CHECKING:
     from ..kinematics.model import RobotModel
-    from .ik import IKResult
 
 __all__ = ["Arm", "Inertial", "Joint", "JointType", "Source"]
 
@@ -359,16 +359,12 @@ class Arm:
         ``method``, ``tol``, ``timeout``, ``rng``, ...). An unsolved target raises
         :class:`~pyopenshowvar.kinematics.UnreachableError` (``errors="nan"``: NaN rows).
         """
-        from .ik import solve
-
         return solve(self, target, seed, **options).value(errors)
 
     def solve_ik(
         self, target: npt.ArrayLike, seed: npt.ArrayLike | None = None, **kw: Any
     ) -> IKResult:
         """Like :meth:`ik`, returning the full :class:`~pyopenshowvar.arms.ik.IKResult`."""
-        from .ik import solve
-
         return solve(self, target, seed, **kw)
 
     # ------------------------------------------------------------------------- display

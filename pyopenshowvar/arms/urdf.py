@@ -73,9 +73,8 @@ def _link_inertial(link: Any) -> Inertial | None:
     return _moved(local, scaled)
 
 
-def load_urdf(path: str | Path, *, tip: str | None = None, name: str | None = None) -> Arm:
-    """An arm from a URDF file (needs the ``urdf`` extra: ``pip install pyopenshowvar[urdf]``)."""
-    p = Path(path)
+def _read(p: Path) -> Any:
+    """The ``robot`` of the URDF file ``p`` (yourdfpy, no meshes, no scene graph)."""
     try:
         import yourdfpy
     except ImportError as exc:  # pragma: no cover - depends on the environment
@@ -92,16 +91,14 @@ def load_urdf(path: str | Path, *, tip: str | None = None, name: str | None = No
         )
     except Exception as exc:  # yourdfpy raises assorted errors (lxml, KeyError, ...)
         raise ArmFileError(f"{p}: not a usable URDF: {exc}") from exc
-    robot = urdf.robot
-    links = {link.name: link for link in robot.links}
-    children: dict[str, list[Any]] = {}
-    parents: set[str] = set()
-    for j in robot.joints:
-        children.setdefault(j.parent, []).append(j)
-        parents.add(j.child)
-    roots = [n for n in links if n not in parents]
-    if len(roots) != 1:
-        raise ArmFileError(f"{p}: a URDF arm needs one root link, found {roots}")
+    return urdf.robot
+
+
+def _chain_to_tip(
+    p: Path, links: set[str], children: dict[str, list[Any]], root: str, tip: str | None
+) -> list[Any]:
+    """The joints from ``root`` to ``tip`` (default: ``tool0``, else ``flange``, else the
+    chain with the most moving joints)."""
 
     def paths(link: str) -> list[list[Any]]:
         out: list[list[Any]] = [[]]
@@ -109,7 +106,7 @@ def load_urdf(path: str | Path, *, tip: str | None = None, name: str | None = No
             out += [[j, *rest] for rest in paths(j.child)]
         return out
 
-    chains = paths(roots[0])
+    chains = paths(root)
     want = tip or next((t for t in ("tool0", "flange") if t in links), None)
     if tip is not None and tip not in links:
         raise ArmFileError(f"{p}: no link {tip!r}")
@@ -119,7 +116,39 @@ def load_urdf(path: str | Path, *, tip: str | None = None, name: str | None = No
         chains.sort(key=lambda c: sum(j.type != "fixed" for j in c), reverse=True)
     if not chains:
         raise ArmFileError(f"{p}: no joint chain to {want!r}")
-    chain = chains[0]
+    return chains[0]
+
+
+def _limits(p: Path, j: Any, revolute: bool) -> tuple[float, float, float, float]:
+    """Joint ``j``'s lower, upper, speed (deg, mm) and effort; a revolute joint without
+    limits (``continuous``) turns ±180°, a prismatic one must have them."""
+    unit = math.degrees(1.0) if revolute else 1000.0
+    lim = j.limit
+    if j.type == "continuous" or lim is None or lim.lower is None or lim.upper is None:
+        if not revolute:
+            raise ArmFileError(f"{p}: prismatic joint {j.name!r} needs lower and upper limits")
+        lower, upper = -180.0, 180.0
+    else:
+        lower, upper = float(lim.lower) * unit, float(lim.upper) * unit
+    speed = float(lim.velocity) * unit if lim is not None and lim.velocity else math.nan
+    effort = float(lim.effort) if lim is not None and lim.effort else math.nan
+    return lower, upper, speed, effort
+
+
+def load_urdf(path: str | Path, *, tip: str | None = None, name: str | None = None) -> Arm:
+    """An arm from a URDF file (needs the ``urdf`` extra: ``pip install pyopenshowvar[urdf]``)."""
+    p = Path(path)
+    robot = _read(p)
+    links = {link.name: link for link in robot.links}
+    children: dict[str, list[Any]] = {}
+    parents: set[str] = set()
+    for j in robot.joints:
+        children.setdefault(j.parent, []).append(j)
+        parents.add(j.child)
+    roots = [n for n in links if n not in parents]
+    if len(roots) != 1:
+        raise ArmFileError(f"{p}: a URDF arm needs one root link, found {roots}")
+    chain = _chain_to_tip(p, set(links), children, roots[0], tip)
 
     def body(link: str) -> Inertial | None:
         """Mass of ``link`` and of everything bolted to it by fixed joints, in its frame."""
@@ -145,16 +174,7 @@ def load_urdf(path: str | Path, *, tip: str | None = None, name: str | None = No
         if base is None:
             base, pending = pending, np.eye(4)
         revolute = j.type != "prismatic"
-        unit = math.degrees(1.0) if revolute else 1000.0
-        lim = j.limit
-        if j.type == "continuous" or lim is None or lim.lower is None or lim.upper is None:
-            if not revolute:
-                raise ArmFileError(f"{p}: prismatic joint {j.name!r} needs lower and upper limits")
-            lower, upper = -180.0, 180.0
-        else:
-            lower, upper = float(lim.lower) * unit, float(lim.upper) * unit
-        speed = float(lim.velocity) * unit if lim is not None and lim.velocity else math.nan
-        effort = float(lim.effort) if lim is not None and lim.effort else math.nan
+        lower, upper, speed, effort = _limits(p, j, revolute)
         axis = np.array([1.0, 0.0, 0.0] if j.axis is None else j.axis, dtype=np.float64)
         try:
             joints.append(

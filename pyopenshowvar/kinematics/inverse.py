@@ -98,13 +98,11 @@ def _solve(model: RobotModel, t6: FloatArray, hint: FloatArray) -> tuple[FloatAr
     in (-180, 180], and the signed distance of the wrist centre beyond reach ``(N,)`` (mm)."""
     _check_structure(model)
     n = t6.shape[0]
-    sign, off = model.sign, np.radians(model.offset)
     hint_theta = np.radians(model.sign * hint + model.offset)  # (N, 6)
     a1, a2, a3 = model.a[0], model.a[1], model.a[2]
     d1, d4, d6 = model.d[0], model.d[3], model.d[5]
     al = np.radians(model.alpha)
     s1 = round(math.sin(al[0]))
-    s4, s5 = round(math.sin(al[3])), round(math.sin(al[4]))
 
     r6 = t6[:, :3, :3]
     # z5 in base: R6·Rx(-α6)·e_z (equals z6 when α6 = 0)
@@ -136,8 +134,41 @@ def _solve(model: RobotModel, t6: FloatArray, hint: FloatArray) -> tuple[FloatAr
     th2 = np.arctan2(py, px)[..., None] - np.arctan2(lf * np.sin(beta), a2 + lf * np.cos(beta))
     th1b = np.broadcast_to(th1[..., None], th2.shape)
 
-    # --- wrist: R36 = R3ᵀ·R6 = Rz(θ4)·Rx(α4)·Rz(θ5)·Rx(α5)·Rz(θ6)·Rx(α6)
-    q123 = np.zeros((n, 2, 2, 6))
+    th4, th5, th6 = _wrist(model, r6, th1b, th2, th3, hint_theta)
+
+    shape = (n, 2, 2, 2)
+    theta = np.stack(
+        [
+            np.broadcast_to(th1b[..., None], shape),
+            np.broadcast_to(th2[..., None], shape),
+            np.broadcast_to(th3[..., None], shape),
+            th4,
+            th5,
+            th6,
+        ],
+        axis=-1,
+    )
+    q = (np.degrees(theta) - model.offset) / model.sign
+    q = 180.0 - (180.0 - q) % 360.0  # wrap into (-180, 180]
+    q = np.where(ok12[:, :, None, None, None], q, np.nan)
+    return q.reshape(n, 8, 6), beyond.min(axis=1)
+
+
+def _wrist(
+    model: RobotModel,
+    r6: FloatArray,
+    th1b: FloatArray,
+    th2: FloatArray,
+    th3: FloatArray,
+    hint_theta: FloatArray,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """θ4, θ5, θ6 ``(N, 2, 2, 2)`` (rad, D-H) for each arm solution ``θ1..θ3 (N, 2, 2)``:
+    R36 = R3ᵀ·R6 = Rz(θ4)·Rx(α4)·Rz(θ5)·Rx(α5)·Rz(θ6)·Rx(α6), both wrist flips; at the wrist
+    singularity θ4 comes from the hint."""
+    sign, off = model.sign, np.radians(model.offset)
+    al = np.radians(model.alpha)
+    s4, s5 = round(math.sin(al[3])), round(math.sin(al[4]))
+    q123 = np.zeros((r6.shape[0], 2, 2, 6))
     q123[..., 0] = (th1b - off[0]) / sign[0]
     q123[..., 1] = (th2 - off[1]) / sign[1]
     q123[..., 2] = (th3 - off[2]) / sign[2]
@@ -162,23 +193,7 @@ def _solve(model: RobotModel, t6: FloatArray, hint: FloatArray) -> tuple[FloatAr
         sing = np.broadcast_to(singular[..., None], th5.shape)
         th4 = np.where(sing, th4_h, th4)
         th6 = np.where(sing, th6_s, th6)
-
-    shape = (n, 2, 2, 2)
-    theta = np.stack(
-        [
-            np.broadcast_to(th1b[..., None], shape),
-            np.broadcast_to(th2[..., None], shape),
-            np.broadcast_to(th3[..., None], shape),
-            th4,
-            th5,
-            th6,
-        ],
-        axis=-1,
-    )
-    q = (np.degrees(theta) - model.offset) / model.sign
-    q = 180.0 - (180.0 - q) % 360.0  # wrap into (-180, 180]
-    q = np.where(ok12[:, :, None, None, None], q, np.nan)
-    return q.reshape(n, 8, 6), beyond.min(axis=1)
+    return th4, th5, th6
 
 
 @lru_cache(maxsize=32)

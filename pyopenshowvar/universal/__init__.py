@@ -18,18 +18,11 @@ from __future__ import annotations
 
 from .closed import ClosedFormSolver, closed_form_for
 from .dls import DLSSolver
+from .factory import SOLVERS, make_solver, solver_names
 from .ga import GASolver
 from .pointfk import PointFK
 from .pso import PSOSolver
-from .solver import (
-    BUDGET,
-    SOLVERS,
-    NoClosedFormError,
-    SolveInfo,
-    Solver,
-    make_solver,
-    solver_names,
-)
+from .solver import BUDGET, NoClosedFormError, SolveInfo, Solver
 from .workspace import Workspace, grid_targets, workspace_of
 
 __all__ = [

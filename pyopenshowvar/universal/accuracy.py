@@ -33,7 +33,8 @@ from ..arms.ik import solve as ik_solve
 from ..arms.model import Arm
 from ..kinematics.frames import FloatArray
 from .closed import closed_form_for
-from .solver import BUDGET, make_solver
+from .factory import make_solver
+from .solver import BUDGET
 from .workspace import Workspace, grid_targets, workspace_of
 
 __all__ = ["AccuracyReport", "accuracy_test", "reach_method", "reachable"]

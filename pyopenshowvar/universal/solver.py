@@ -23,7 +23,7 @@ import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -35,12 +35,9 @@ from .workspace import Workspace, workspace_of
 
 __all__ = [
     "BUDGET",
-    "SOLVERS",
     "NoClosedFormError",
     "SolveInfo",
     "Solver",
-    "make_solver",
-    "solver_names",
 ]
 
 #: The thesis' time limit per solve: "when the overall population evolution time exceeds
@@ -170,40 +167,3 @@ class Solver(ABC):
         below = np.maximum(self.lower - q, 0.0)
         above = np.maximum(q - self.upper, 0.0)
         return np.asarray(np.sum((below + above) / self.span, axis=-1))
-
-
-def _registry() -> dict[str, type[Solver]]:
-    from .closed import ClosedFormSolver
-    from .dls import DLSSolver
-    from .ga import GASolver
-    from .pso import PSOSolver
-
-    return {s.name: s for s in (ClosedFormSolver, DLSSolver, GASolver, PSOSolver)}
-
-
-#: The solvers by the names used at run time (``kvp universal --solver``).
-SOLVERS = ("closed-form", "dls", "ga", "pso")
-
-
-def solver_names(arm: Arm | None = None) -> list[str]:
-    """The solver names; for an ``arm``, only those that apply (closed form where it has one)."""
-    if arm is None:
-        return list(SOLVERS)
-    from .closed import closed_form_for
-
-    return [n for n in SOLVERS if n != "closed-form" or closed_form_for(arm) is not None]
-
-
-def make_solver(name: str, arm: Arm, **options: Any) -> Solver:
-    """A solver by name (``closed-form``, ``dls``, ``ga``, ``pso``) for ``arm``.
-
-    Raises ``ValueError`` for an unknown name and :class:`NoClosedFormError` for
-    ``closed-form`` on an arm without one.
-    """
-    registry = _registry()
-    key = name.strip().lower().replace("_", "-")
-    if key == "closed":
-        key = "closed-form"
-    if key not in registry:
-        raise ValueError(f"unknown solver {name!r}: one of {', '.join(SOLVERS)}")
-    return registry[key](arm, **options)

@@ -54,9 +54,6 @@ class Workspace:
         """Positions (mm) relative to the centre, in units of :attr:`scale`."""
         return np.asarray((np.asarray(x, dtype=np.float64) - self.centre) / self.scale)
 
-    def denormalise(self, xn: npt.ArrayLike) -> FloatArray:
-        return np.asarray(np.asarray(xn, dtype=np.float64) * self.scale + self.centre)
-
     def contains(self, x: npt.ArrayLike) -> npt.NDArray[np.bool_]:
         xa = np.asarray(x, dtype=np.float64)
         return np.asarray(np.all((xa >= self.lower) & (xa <= self.upper), axis=-1))

@@ -37,8 +37,8 @@ from kukavarproxy_emu.abuse import (
     long_names,
     mode3_flood,
     non_reader,
+    run_abuse,
 )
-from kukavarproxy_emu.abuse_modes import run_abuse
 from pyopenshowvar.protocol import ReplyDecoder, encode_read
 
 pytestmark = [

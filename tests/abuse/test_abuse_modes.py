@@ -29,16 +29,20 @@ from typing import Any
 
 import pytest
 
-from kukavarproxy_emu import abuse_modes
 from kukavarproxy_emu.abuse import (
+    Abuser,
     AbuseTally,
     EmulatorProcess,
     ProbeResult,
+    big_module,
+    c3_garbage,
+    c3_selects,
     garbage,
+    in_flood,
     long_names,
     non_reader,
 )
-from kukavarproxy_emu.abuse_modes import Abuser, big_module, c3_garbage, c3_selects, in_flood
+from kukavarproxy_emu.abuse import modes as abuse_modes
 from pyopenshowvar import sync
 
 pytestmark = [

@@ -11,8 +11,9 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from kukavarproxy_emu.plant.mjcf import GRAVITY, Payload, frame_matrix
-from kukavarproxy_emu.plant.params import Bodies, dh_matrix
+from kukavarproxy_emu.plant.frames import dh_matrix, frame_matrix
+from kukavarproxy_emu.plant.mjcf import GRAVITY, Payload
+from kukavarproxy_emu.plant.params import Bodies
 
 FloatArray = npt.NDArray[np.float64]
 

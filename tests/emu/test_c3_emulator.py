@@ -206,7 +206,7 @@ async def test_work_per_message_is_bounded(emulator_factory: EmulatorFactory) ->
     (the reply says how many), a module over MAX_MODULE is not parsed, and all upload buffers
     together stay under the budget."""
     from kukavarproxy_emu.c3.control import MAX_MODULE
-    from kukavarproxy_emu.c3.responder import BENCHMARK_OPS
+    from kukavarproxy_emu.c3.server import BENCHMARK_OPS
     from pyopenshowvar.c3.messages import Benchmark, ProgramSelect
     from pyopenshowvar.c3.replies import BenchmarkReply
 

@@ -13,7 +13,7 @@ import struct
 import pytest
 
 from kukavarproxy_emu import Emulator
-from kukavarproxy_emu.abuse_modes import big_module
+from kukavarproxy_emu.abuse import big_module
 from kukavarproxy_emu.c3 import HANDLED, VERSION
 from kukavarproxy_emu.testing import EmulatorFactory, RawClient, wait_until
 from pyopenshowvar.c3.constants import ErrorCode

@@ -20,8 +20,9 @@ from kukavarproxy_emu import Cell, EmulatorConfig, cell_configs
 from kukavarproxy_emu.__main__ import main as emu_main
 from kukavarproxy_emu.krl.executor import parse_text
 from kukavarproxy_emu.latency import LatencyProfile, ServiceQueue, tick_gate
-from kukavarproxy_emu.motion import IpoClock, Robot
+from kukavarproxy_emu.motion import IpoClock
 from kukavarproxy_emu.motion.clock import release
+from kukavarproxy_emu.robot_task import Robot
 from kukavarproxy_emu.store import VariableStore
 from kukavarproxy_emu.testing import TEST_CONFIG
 from pyopenshowvar import Client

@@ -13,8 +13,8 @@ import math
 from dataclasses import replace
 
 from kukavarproxy_emu import Emulator
-from kukavarproxy_emu.handler import build_store
-from kukavarproxy_emu.motion import Robot
+from kukavarproxy_emu.responder import build_store
+from kukavarproxy_emu.robot_task import Robot
 from kukavarproxy_emu.store import VariableStore
 from kukavarproxy_emu.testing import TEST_CONFIG, wait_until
 from pyopenshowvar import Client

@@ -4,16 +4,16 @@ from __future__ import annotations
 
 import pytest
 
-from kukavarproxy_emu.datfile import (
+from kukavarproxy_emu.default_config import load_default_config
+from kukavarproxy_emu.store import UnknownVariable, VariableStore, WriteRefused
+from pyopenshowvar.krl.datfile import (
     Assignment,
     DatSyntaxError,
     Declaration,
     EnumDecl,
     StrucDecl,
-    load_default_config,
     parse_dat,
 )
-from kukavarproxy_emu.store import UnknownVariable, VariableStore, WriteRefused
 
 REALISTIC = """\
 &ACCESS RVO

@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from kukavarproxy_emu import EmulatorThread
-from kukavarproxy_emu.server import READ_SIZE
+from kukavarproxy_emu.kvp_connection import FRAMED_READ_BYTES
 
 # the fixtures (the root conftest may also load them as a plugin)
 from kukavarproxy_emu.testing import *  # noqa: F403
@@ -115,7 +115,7 @@ def test_fuzz_server_survives(
     )
     for info in emu.call(emu.emulator.connections):
         assert info.buffered < MAX_FRAME
-        assert info.pending <= MAX_PENDING + READ_SIZE // 7
+        assert info.pending <= MAX_PENDING + FRAMED_READ_BYTES // 7
         assert info.write_buffer < 1 << 20
 
 
@@ -156,7 +156,7 @@ async def test_flood_without_reading_stays_bounded(
         await asyncio.sleep(0.05)
     assert info.reading_paused
     assert info.received < n
-    assert info.pending <= MAX_PENDING + READ_SIZE // 14
+    assert info.pending <= MAX_PENDING + FRAMED_READ_BYTES // 14
     assert info.write_buffer < 1 << 20
     assert info.buffered < 14
     # now read everything: nothing was lost and the order is intact

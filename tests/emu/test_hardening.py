@@ -22,9 +22,9 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from kukavarproxy_emu import Emulator, EmulatorConfig, server
+from kukavarproxy_emu import Emulator, EmulatorConfig, kvp_connection
 from kukavarproxy_emu.__main__ import build_parser, config_from_args
-from kukavarproxy_emu.handler import Responder
+from kukavarproxy_emu.responder import Responder
 from kukavarproxy_emu.store import VariableStore
 from kukavarproxy_emu.testing import EmulatorFactory, RawClient
 from pyopenshowvar.protocol import (
@@ -121,7 +121,7 @@ async def test_idle_drop_of_a_non_reading_client_frees_its_slot(
 async def test_garbage_after_unread_requests_frees_the_slot_after_the_grace(
     emulator_factory: EmulatorFactory, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(server, "ERROR_GRACE", 0.3)
+    monkeypatch.setattr(kvp_connection, "ERROR_GRACE", 0.3)
     emu = await emulator_factory(robot=False, max_clients=1, idle_timeout=0)
     loop = asyncio.get_running_loop()
     sock = await raw_socket(emu)
@@ -412,7 +412,7 @@ def test_whole_array_reads_after_mode3_writes_stay_cheap() -> None:
     )
 )
 def test_mode2_words_equal_vb_clng_element_by_element(tokens: list[str]) -> None:
-    from kukavarproxy_emu.handler import _pack_words, _to_word  # the fast path, and VB's rule
+    from kukavarproxy_emu.responder import _pack_words, _to_word  # the fast path, and VB's rule
 
     try:
         expected: bytes | None = b"".join(struct.pack(">H", _to_word(t)) for t in tokens)

@@ -10,7 +10,7 @@ import pytest
 
 from kukavarproxy_emu.krl.executor import KrlProgram, load_module
 from kukavarproxy_emu.krl.parser import KrlSyntaxError
-from kukavarproxy_emu.motion import Robot
+from kukavarproxy_emu.robot_task import Robot
 from kukavarproxy_emu.store import VariableStore
 
 IPO = 0.012

@@ -19,12 +19,12 @@ from pathlib import Path
 
 import pytest
 
-from kukavarproxy_emu.datfile import DatSyntaxError, parse_dat
 from kukavarproxy_emu.krl import interp
 from kukavarproxy_emu.krl.executor import KrlProgram, load_module
 from kukavarproxy_emu.krl.parser import KrlSyntaxError, parse_src
-from kukavarproxy_emu.motion import Robot
+from kukavarproxy_emu.robot_task import Robot
 from kukavarproxy_emu.store import VariableStore
+from pyopenshowvar.krl.datfile import DatSyntaxError, parse_dat
 
 DAT = "DEFDAT $CONFIG\nDECL INT RI=0\nDECL REAL RR=0.0\nENDDAT\n"
 #: CPU seconds one cycle may take: the 2 ms budget plus one statement, with a wide margin.

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from kukavarproxy_emu import Emulator
-from kukavarproxy_emu.motion import Robot
 from kukavarproxy_emu.motion.kernel import MotionRefused
+from kukavarproxy_emu.robot_task import Robot
 from kukavarproxy_emu.store import VariableStore
 from kukavarproxy_emu.testing import EmulatorFactory, RawClient
 from pyopenshowvar import Client, Frame

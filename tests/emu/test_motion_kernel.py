@@ -12,7 +12,9 @@ import numpy as np
 import pytest
 
 from kukavarproxy_emu.config import ROBOT_PROGRAMS
-from kukavarproxy_emu.motion import PROGRAMS, Robot, Trapezoid, ptp_profile
+from kukavarproxy_emu.motion import Trapezoid, ptp_profile
+from kukavarproxy_emu.program_factory import PROGRAMS
+from kukavarproxy_emu.robot_task import Robot
 from kukavarproxy_emu.store import VariableStore
 from pyopenshowvar.kinematics import KR6R900SIXX, gravity_torques, wrench_to_torques
 from pyopenshowvar.krl import E6Axis

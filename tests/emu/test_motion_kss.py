@@ -16,8 +16,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from kukavarproxy_emu.motion import MotionRefused, Robot, Trapezoid
+from kukavarproxy_emu.motion import MotionRefused, Trapezoid
 from kukavarproxy_emu.motion.profiles import Profile, pl_min
+from kukavarproxy_emu.robot_task import Robot
 from kukavarproxy_emu.store import VariableStore
 from pyopenshowvar.kinematics import KR6R900SIXX, forward, inverse, matrix_to_frame, pose_to_matrix
 from pyopenshowvar.krl import E6Axis

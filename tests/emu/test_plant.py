@@ -16,11 +16,11 @@ from newton_euler import inverse_dynamics, tcp_jacobian
 
 from kukavarproxy_emu import EmulatorConfig
 from kukavarproxy_emu.__main__ import build_parser, config_from_args
-from kukavarproxy_emu.motion import Robot
 from kukavarproxy_emu.plant import Obstacle
 from kukavarproxy_emu.plant.dynamic import DynamicPlant
-from kukavarproxy_emu.plant.mjcf import frame_matrix, payload_of
-from kukavarproxy_emu.plant.params import dh_matrix
+from kukavarproxy_emu.plant.frames import dh_matrix, frame_matrix
+from kukavarproxy_emu.plant.mjcf import payload_of
+from kukavarproxy_emu.robot_task import Robot
 from kukavarproxy_emu.store import VariableStore
 from pyopenshowvar import Client
 from pyopenshowvar.kinematics import KR6R900SIXX, fk_matrix

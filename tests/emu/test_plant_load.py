@@ -19,9 +19,10 @@ import numpy as np
 import pytest
 from newton_euler import inverse_dynamics
 
-from kukavarproxy_emu.motion import MotionKernel, MotionRefused, Robot
+from kukavarproxy_emu.motion import MotionKernel, MotionRefused
 from kukavarproxy_emu.plant.dynamic import DynamicPlant
 from kukavarproxy_emu.plant.mjcf import payload_of
+from kukavarproxy_emu.robot_task import Robot
 from kukavarproxy_emu.store import VariableStore
 from pyopenshowvar import Client
 from pyopenshowvar.kinematics import KR6R900SIXX as M

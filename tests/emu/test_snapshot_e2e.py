@@ -20,8 +20,8 @@ import pytest
 from pyopenshowvar_apps.cli import EXIT_USAGE, app
 from typer.testing import CliRunner
 
+from kukavarproxy_emu.emulator_thread import EmulatorThread
 from kukavarproxy_emu.testing import TEST_CONFIG
-from kukavarproxy_emu.threaded import EmulatorThread
 from pyopenshowvar import (
     Client,
     E6Axis,

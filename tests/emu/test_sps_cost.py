@@ -16,9 +16,9 @@ from pathlib import Path
 
 import pytest
 
-from kukavarproxy_emu.handler import build_store
 from kukavarproxy_emu.krl import plan as plan_module
-from kukavarproxy_emu.motion import Robot
+from kukavarproxy_emu.responder import build_store
+from kukavarproxy_emu.robot_task import Robot
 from kukavarproxy_emu.testing import TEST_CONFIG
 from pyopenshowvar import Snapshot
 from pyopenshowvar.krl import Struct

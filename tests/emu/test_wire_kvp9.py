@@ -15,9 +15,9 @@ from hypothesis import strategies as st
 
 from kukavarproxy_emu import Emulator, EmulatorConfig, Fault
 from kukavarproxy_emu.__main__ import build_parser, config_from_args
-from kukavarproxy_emu.handler import Responder, extract_variable_value
-from kukavarproxy_emu.kvp9 import READ_SIZE, ReadOutcome, sock_server_read
+from kukavarproxy_emu.kvp9 import KVP_READ_BYTES, ReadOutcome, sock_server_read
 from kukavarproxy_emu.kvp9_connection import FLUSH_SIZE, SEND_LIMIT, Kvp9ConnectionInfo
+from kukavarproxy_emu.responder import Responder, extract_variable_value
 from kukavarproxy_emu.store import VariableStore
 from kukavarproxy_emu.testing import EmulatorFactory, RawClient
 from pyopenshowvar.protocol import (
@@ -66,7 +66,7 @@ def run(coro: Coroutine[Any, Any, ReadOutcome]) -> ReadOutcome:
 
 
 @settings(max_examples=300, deadline=None)
-@given(st.binary(max_size=READ_SIZE))
+@given(st.binary(max_size=KVP_READ_BYTES))
 def test_any_read_is_walked_with_bounded_work(data: bytes) -> None:
     """Whatever a read holds, the walk ends (no exception escapes), one request per >= 4 bytes."""
     wire = DictWire()
@@ -164,15 +164,15 @@ async def test_flood_bounded_work_and_memory(emulator_factory: EmulatorFactory) 
             c.writer.write(burst)
             await asyncio.sleep(0.001)
             assert conn.info().write_buffer <= SEND_LIMIT + FLUSH_SIZE
-    assert conn.reads > 10 and conn.largest_read <= READ_SIZE
+    assert conn.reads > 10 and conn.largest_read <= KVP_READ_BYTES
     # Amplifying input: after a read, 4-byte requests of unknown mode 0xFF each answer the
     # previous reply nested once more (about 0.5 MB of replies for one 2 KiB read).
     c2, conn2 = await _slow_reader(emu)
-    c2.writer.write(encode_read(1, "$OV_PRO") + H("FF00 0000") * ((READ_SIZE - 14) // 4))
+    c2.writer.write(encode_read(1, "$OV_PRO") + H("FF00 0000") * ((KVP_READ_BYTES - 14) // 4))
     async with asyncio.timeout(10):
         while not conn2.closed:  # noqa: ASYNC110 - the dropped flag has no event to wait on
             await asyncio.sleep(0.001)
-    assert conn2.most_messages <= READ_SIZE // 4 and conn2.largest_read <= READ_SIZE
+    assert conn2.most_messages <= KVP_READ_BYTES // 4 and conn2.largest_read <= KVP_READ_BYTES
     for client in (c, c2):  # the kernel still holds replies; then EOF or a reset
         with contextlib.suppress(ConnectionError):
             await client.read_until_eof(timeout=5)
@@ -351,12 +351,12 @@ async def test_a_read_paused_at_every_step_answers_the_same_bytes(
     monkeypatch.setattr(server, "ROUND", 0.0)
     emu = await kvp9(emulator_factory)
     served: list[int] = []
-    original = kvp9_connection.Kvp9Connection._serve
+    original = kvp9_connection.Kvp9Connection.serve
 
     def counted(self: kvp9_connection.Kvp9Connection, budget: float) -> None:
         served.append(1)
         original(self, budget)
 
-    monkeypatch.setattr(kvp9_connection.Kvp9Connection, "_serve", counted)
+    monkeypatch.setattr(kvp9_connection.Kvp9Connection, "serve", counted)
     assert await answer(emu) == whole
     assert len(whole) > 100 and len(served) >= 6  # it really paused, many times

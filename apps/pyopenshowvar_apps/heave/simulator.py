@@ -22,7 +22,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Self, TypeVar
 
-from kukavarproxy_emu.loopthread import LoopThread
+from pyopenshowvar.loopthread import LoopThread
 
 from . import registers as reg
 from .accel import AccelFirmware, format_line

@@ -1,7 +1,8 @@
 """Parser for KRL data lists (``$CONFIG.DAT`` and module ``.DAT`` files).
 
-This is the one place that understands KRL declaration syntax; the variable store loads the
-emulator's globals with it and the KRL interpreter will reuse it for module data lists. It is
+This is the one place that understands KRL declaration syntax: the emulator's variable store
+loads its globals with it, its KRL interpreter reads module data lists with it, and the apps
+list the names a ``$CONFIG.DAT`` declares (``kvp --config``). It is
 purely syntactic: initial values stay KRL literal text (``={A1 0.0, A2 -90.0}``, ``=#T1``,
 ``="text"``) and are handed to :func:`pyopenshowvar.krl.parse_value` by whoever knows the types,
 so this module does not depend on the type registry at all.
@@ -28,7 +29,6 @@ from __future__ import annotations
 import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 
 __all__ = [
@@ -39,8 +39,6 @@ __all__ = [
     "Declaration",
     "EnumDecl",
     "StrucDecl",
-    "default_config_text",
-    "load_default_config",
     "parse_dat",
     "parse_declaration",
     "read_dat",
@@ -453,13 +451,3 @@ def read_dat(path: str | Path, encoding: str = "latin-1") -> DatFile:
     """Read and parse a data list file; KRC files are Windows-1252/latin-1, not UTF-8."""
     path = Path(path)
     return parse_dat(path.read_text(encoding=encoding), filename=str(path))
-
-
-def default_config_text() -> str:
-    """The text of the emulator's bundled ``default_config.dat``."""
-    return resources.files(__package__).joinpath("default_config.dat").read_text(encoding="utf-8")
-
-
-def load_default_config() -> DatFile:
-    """The parsed bundled ``default_config.dat`` (the globals the thesis programs use)."""
-    return parse_dat(default_config_text(), filename="default_config.dat")

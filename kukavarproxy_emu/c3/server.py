@@ -2,7 +2,7 @@
 
 :class:`C3Server` is the state one emulator shares between connections (virtual file system,
 robot control, internal variables); :meth:`C3Server.session` makes each connection its own
-:class:`C3Session`, a :class:`~kukavarproxy_emu.handler.Responder` with the connection's upload
+:class:`C3Session`, a :class:`~kukavarproxy_emu.responder.Responder` with the connection's upload
 and download buffers. Behaviour follows ``source/client.cpp`` and ``source/handlers/*.cpp``:
 
 * every message is a tag, a size, a type and a payload its handler parses field by field
@@ -26,7 +26,7 @@ and download buffers. Behaviour follows ``source/client.cpp`` and ``source/handl
 Each message is answered in one synchronous call, between two interpolation cycles, so a
 read-multiple returns values of one cycle. The one exception is a select (and what must wait
 for one): its module is parsed in slices, and :meth:`C3Session.answer` raises
-:class:`~kukavarproxy_emu.handler.Deferred` so that the connection sends the answer later.
+:class:`~kukavarproxy_emu.responder.Deferred` so that the connection sends the answer later.
 """
 
 from __future__ import annotations
@@ -53,16 +53,16 @@ from pyopenshowvar.c3.wire import PayloadError, Reader
 from pyopenshowvar.errors import ProtocolError
 from pyopenshowvar.protocol import ENCODING, HEADER_SIZE, Mode, Reply, Request
 
-from ..handler import Deferred, Responder
 from ..latency import Kind
 from ..logsafe import RateLimitedLog
+from ..responder import Deferred, Responder
 from ..slices import Checkpoint, run_sliced
 from .control import RobotControl
 from .filemsgs import FileHandlers, IoBuffers
 from .vfs import Limits, VirtualFS
 
 if TYPE_CHECKING:
-    from ..motion import Robot
+    from ..robot_task import Robot
     from ..store import VariableStore
 
 __all__ = ["HANDLED", "VERSION", "C3Server", "C3Session"]

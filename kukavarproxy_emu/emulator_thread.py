@@ -6,9 +6,10 @@ the emulator keeps its own event loop so it serves requests while the caller blo
 
 from __future__ import annotations
 
+from pyopenshowvar.loopthread import LoopThread
+
 from .config import EmulatorConfig
 from .faults import FaultSet
-from .loopthread import LoopThread
 from .server import Emulator, Stats
 from .store import VariableStore
 

@@ -1,7 +1,8 @@
-"""The KRC4 system variables the emulator holds, with types, access and initial values.
+"""The KRC4 system variables: types, access, value ranges and a KRC4's texts at HOME.
 
-The table is data only: :class:`~kukavarproxy_emu.store.VariableStore` declares each entry and
-parses its initial literal with the entry's type. The robot model updates the read-only
+KRC facts both sides use: the emulator's variable store (:mod:`kukavarproxy_emu.store`)
+declares each entry and parses its initial literal with the entry's type; the apps explain a
+refused write with an entry's access and range. The table is data only. The robot model updates the read-only
 motion variables later through ``VariableStore.set_system``; the values here are the state of
 a KR 6 R900 sixx standing at HOME (A1..A6 = 0, -90, 90, 0, 0, 0) on a KRC4 in ``#AUT``.
 
@@ -9,7 +10,7 @@ Figures: the variables and their texts as captured from KRC4s in public clients,
 sixx limits (kroshu/kuka_robot_descriptions, ros-industrial/kuka_experimental), the holding
 torques of KUKA's KR 6 R900-2 masses at the HOME pose. Initial values can be replaced per name with
 ``system_variables(overrides)``, e.g. ``{"$MODE_OP": "#T1"}`` for a teach-mode controller;
-another arm (``--robot``) replaces the arm's own ones (:meth:`~.robots.RobotSpec.sysvar_overrides`).
+another arm (``--robot``) replaces the arm's own ones (``kukavarproxy_emu.robots.RobotSpec.sysvar_overrides``).
 """
 
 from __future__ import annotations

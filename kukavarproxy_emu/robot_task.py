@@ -28,16 +28,17 @@ import numpy.typing as npt
 from pyopenshowvar.kinematics import KR6R900SIXX, RobotModel
 from pyopenshowvar.krl import KrlEnum, Struct
 
-from ..plant import Obstacle, make_plant
-from ..store import VariableStore
-from .clock import IpoClock, JitterStats
-from .kernel import MotionKernel, MotionRefused
-from .programs import Idle, Program, make_program
+from .krl.executor import KrlProgram, KrlSubmit
+from .motion.clock import IpoClock, JitterStats
+from .motion.kernel import MotionKernel, MotionRefused
+from .motion.programs import Idle, Program
+from .plant import Obstacle, make_plant
+from .program_factory import make_program, make_submit
+from .store import VariableStore
 
 if TYPE_CHECKING:
-    from ..krl.executor import KrlSubmit
-    from ..plant.params import PlantParams
-    from .dynamics import MachineData
+    from .motion.dynamics import MachineData
+    from .plant.params import PlantParams
 
 __all__ = ["MESSAGE_LENGTH", "Robot"]
 
@@ -46,7 +47,7 @@ log = logging.getLogger(__name__)
 #: Characters of ``$EMU_MESSAGE[]`` (longer messages are cut).
 MESSAGE_LENGTH = 128
 _WRENCH = ("FX", "FY", "FZ", "MX", "MY", "MZ")
-#: Ticks per wake-up of a robot at rest (see "Coasting" in :mod:`.clock`): 8 × 12 ms.
+#: Ticks per wake-up of a robot at rest (see "Coasting" in :mod:`.motion.clock`): 8 × 12 ms.
 COAST = 8
 
 
@@ -106,12 +107,7 @@ class Robot:
         else:
             self.program = make_program(program, store)
         #: The submit interpreter running the SPS (Algorithm 4.11 by default); None: no SPS.
-        self.sps: KrlSubmit | None = None
-        if sps is not None and sps != "none":
-            from ..krl.executor import KrlSubmit, load_module  # the interpreter imports motion
-
-            self.sps = KrlSubmit(load_module(sps), store, ipo=ipo)
-            self.sps.start()
+        self.sps: KrlSubmit | None = make_submit(sps, store, ipo=ipo)
         self.clock = IpoClock(
             self.tick, ipo=ipo, speed=speed, phase=phase, coast=coast, quiet=self._is_quiet
         )
@@ -201,8 +197,6 @@ class Robot:
         """The KRL passes skipped as exact repeats so far (program, SPS) and how many a quiet
         tick adds to each (0 for an interpreter that does not run); None: a program whose
         passes cannot be told apart (a Python program other than Idle)."""
-        from ..krl.executor import KrlProgram  # the interpreter imports motion
-
         program = self.program
         if not self.running or isinstance(program, Idle):
             p, dp = 0, 0
@@ -305,7 +299,7 @@ class Robot:
         return self.kernel.q.copy()
 
     def jitter(self) -> JitterStats:
-        """IPO tick lateness statistics (see :class:`~.clock.IpoClock`)."""
+        """IPO tick lateness statistics (see :class:`~.motion.clock.IpoClock`)."""
         return self.clock.stats()
 
     def _set(self, name: str, value: object) -> None:

@@ -1,9 +1,10 @@
 """An asyncio service on its own event loop in a daemon thread, for synchronous callers.
 
-:class:`~kukavarproxy_emu.threaded.EmulatorThread` and the heave case study's platform
+:class:`~kukavarproxy_emu.emulator_thread.EmulatorThread` and the heave case study's platform
 simulator both need the same lifecycle: build the service on a private loop, report start-up
 errors to the caller, run callables on that loop, and close the service when stopped. This
-module has it once. It imports nothing of the emulator, so a light service does not pay for it.
+module has it once, in the client library both may depend on; it imports nothing else, so a
+light service does not pay for more.
 """
 
 from __future__ import annotations

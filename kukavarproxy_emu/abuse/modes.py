@@ -1,6 +1,6 @@
 """Abusers of the wire-faithful (``--wire kvp9``) and C3 Bridge (``--proxy c3bridge``) modes,
-and the peak memory of a process: tools of the abuse suite (``tests/abuse``) and of
-``bench/isolation.py``, next to the KVP-core abusers of :mod:`kukavarproxy_emu.abuse`.
+and the abuse run: tools of the abuse suite (``tests/abuse``) and of ``bench/isolation.py``,
+next to the KVP-core abusers of :mod:`.abusers`.
 
 * :func:`in_flood` — pipelined reads of the 24 KB ``$IN[]``, ``depth`` per write, every reply
   read (counted by bytes, so the abuser costs little CPU and the emulator gets the cores);
@@ -8,13 +8,10 @@ and the peak memory of a process: tools of the abuse suite (``tests/abuse``) and
 * :func:`c3_garbage` — C3 messages of every handled type with random, truncated or oversized
   payloads (and the 400-digit motion of the issue), each answered or the connection closed;
 * :func:`big_module` — a valid KRL module of about ``size`` bytes (a long straight routine);
-* :class:`PeakRss` — resident memory high-water mark of a process since :meth:`PeakRss.reset`
-  (Linux ``VmHWM``, reset through ``/proc/PID/clear_refs``), so a test sees the peak *during*
-  the abuse, not what is left after the abusers went away;
 * :func:`run_abuse` — the bystander and a set of abusers against an emulator process, with
-  that peak.
+  its peak memory (:class:`~.process.PeakRss`).
 
-Abusers count what they see in an :class:`~kukavarproxy_emu.abuse.AbuseTally` and never
+Abusers count what they see in an :class:`~.abusers.AbuseTally` and never
 assert; ``errors`` counts what a well-behaved server should never cause (a refused connect, an
 unexpected close, a reply that does not parse).
 """
@@ -25,44 +22,21 @@ import asyncio
 import random
 import struct
 from collections.abc import Callable, Coroutine, Sequence
-from pathlib import Path
 from typing import Any
 
 from pyopenshowvar.c3.messages import ProgramSelect
 from pyopenshowvar.protocol import HEADER_SIZE, decode_reply, encode_read
 
-from .abuse import AbuseTally, EmulatorProcess, ProbeResult, start_probe
+from .abusers import AbuseTally
+from .probe import ProbeResult, start_probe
+from .process import EmulatorProcess, PeakRss
 
-__all__ = ["Abuser", "PeakRss", "big_module", "c3_garbage", "c3_selects", "in_flood", "run_abuse"]
+__all__ = ["Abuser", "big_module", "c3_garbage", "c3_selects", "in_flood", "run_abuse"]
 
 #: An abuser: ``abuser(host, port, tally)`` misbehaves until cancelled.
 Abuser = Callable[[str, int, AbuseTally], Coroutine[Any, Any, None]]
 
 _U16 = struct.Struct(">H")
-
-
-class PeakRss:
-    """The peak resident memory (MB) of process ``pid`` since the last :meth:`reset`."""
-
-    def __init__(self, pid: int) -> None:
-        self.pid = pid
-
-    def _status(self, key: str) -> float:
-        for line in Path(f"/proc/{self.pid}/status").read_text().splitlines():
-            if line.startswith(key):
-                return int(line.split()[1]) * 1024 / 1e6
-        raise RuntimeError(f"no {key} for process {self.pid}")
-
-    def rss_mb(self) -> float:
-        return self._status("VmRSS:")
-
-    def reset(self) -> float:
-        """Start a new peak at the current RSS (``clear_refs`` 5); returns that RSS."""
-        Path(f"/proc/{self.pid}/clear_refs").write_text("5")
-        return self.rss_mb()
-
-    def peak_mb(self) -> float:
-        return self._status("VmHWM:")
 
 
 async def _read_exactly(reader: asyncio.StreamReader, size: int, timeout: float) -> bytes:
