@@ -2,7 +2,7 @@
 
 Completion draws on three sources: a built-in list of common KRC4 system variables, the
 names an emulator's store declares (``--emulate``), and the globals of ``$CONFIG.DAT``-style
-files given with ``--config`` (parsed with :func:`kukavarproxy_emu.datfile.parse_dat`).
+files given with ``--config`` (parsed with :func:`pyopenshowvar.krl.datfile.parse_dat`).
 
 Names that can only read as unknown are not offered: a bare 1-D array or text name
 (KUKAVARPROXY reads ``NAME[]`` or ``NAME[i]``, so only ``NAME[]`` is offered), ``NAME[]`` of a

@@ -7,7 +7,7 @@ and out of range all look the same on the wire (reference §2.3). So the tools
 * parse the literal before sending it, and point at the character where it goes wrong;
 * after a refusal, read the variable and compare: unknown name, a value of the wrong type
   (checked with the type the controller prints), a KRC4 system variable that is read-only or
-  has a range (:data:`kukavarproxy_emu.sysvars.SYSTEM_VARIABLES`, the KRC4 facts the emulator
+  has a range (:data:`pyopenshowvar.sysvars.SYSTEM_VARIABLES`, the KRC4 facts the emulator
   is built from);
 * around a write while the robot program runs, read ``$PRO_STATE1`` and ``$STOPMESS`` (and the
   emulator's ``$EMU_MESSAGE[]``, which a real KRC does not have) for a short window, because a

@@ -4,7 +4,7 @@ A real set-up has the KRC, the PLC and the control PC on separate hardware; the 
 experiment keeps the emulator out of the control server's process the same way, so the two do
 not share one interpreter lock (a moving robot costs the emulator several milliseconds per 12 ms
 cycle). The child (``python -m pyopenshowvar_apps.heave.emuproc``) runs an
-:class:`~kukavarproxy_emu.threaded.EmulatorThread` and, on the emulator's own event loop, copies
+:class:`~kukavarproxy_emu.emulator_thread.EmulatorThread` and, on the emulator's own event loop, copies
 the simulated robot's state every few milliseconds into a small memory-mapped file: time, axes,
 flange pose in the base frame (the plant's ground truth when the emulator runs a dynamic plant).
 :meth:`EmulatorProcess.robot_state` reads it without locks (a sequence counter detects a torn
