@@ -10,8 +10,9 @@ See docs/emulator.md for the behaviours, latency profiles and fault injection.
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING, Any
+
+from pyopenshowvar import lazy
 
 if TYPE_CHECKING:
     from .cell import Cell, cell_configs
@@ -45,10 +46,7 @@ _LAZY = {
 
 
 def __getattr__(name: str) -> Any:
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    return getattr(importlib.import_module(f".{module}", __name__), name)
+    return lazy.load(__name__, _LAZY, globals(), name)
 
 
 __all__ = [

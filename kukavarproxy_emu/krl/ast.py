@@ -42,6 +42,7 @@ from .ast_expr import (
     StrLit,
     Unary,
     Value,
+    is_lvalue,
 )
 
 __all__ = [
@@ -86,6 +87,7 @@ __all__ = [
     "WaitFor",
     "WaitSec",
     "While",
+    "is_lvalue",
 ]
 
 

@@ -162,3 +162,12 @@ Expr: TypeAlias = (
     | Call
     | Value
 )
+
+
+def is_lvalue(expr: Expr) -> bool:
+    """Whether ``expr`` names storage: a variable, or a member or element of one."""
+    if isinstance(expr, Name):
+        return True
+    if isinstance(expr, Member | Index):
+        return is_lvalue(expr.base)
+    return False

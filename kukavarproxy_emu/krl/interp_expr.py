@@ -47,14 +47,6 @@ def _children(expr: ast.Expr) -> tuple[ast.Expr, ...]:
     return ()  # aggregates hold constants only
 
 
-def _is_lvalue(expr: ast.Expr) -> bool:
-    if isinstance(expr, ast.Name):
-        return True
-    if isinstance(expr, ast.Member | ast.Index):
-        return _is_lvalue(expr.base)
-    return False
-
-
 class ExprMixin:
     """The expression part of :class:`~.interp.Interpreter` (needs ``ev`` and ``_call_fn``)."""
 
@@ -104,7 +96,7 @@ class ExprMixin:
         if not self._has_call(expr):
             return expr
         if isinstance(expr, ast.Index | ast.Member):
-            if _is_lvalue(expr.base):
+            if ast.is_lvalue(expr.base):
                 base = yield from self._lower(expr.base)
             else:
                 base = self._value(expr.base, (yield from self._eval(expr.base)))

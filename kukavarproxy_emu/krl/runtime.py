@@ -265,7 +265,7 @@ class Evaluator:
         if isinstance(expr, ast.IntLit | ast.RealLit | ast.BoolLit | ast.StrLit | ast.Value):
             return expr.value
         if isinstance(expr, ast.Name | ast.Index | ast.Member):
-            if isinstance(expr, ast.Member) and not _is_lvalue(expr.base):
+            if isinstance(expr, ast.Member) and not ast.is_lvalue(expr.base):
                 base = self.eval(expr.base)
                 if not isinstance(base, Struct) or expr.member not in base:
                     raise KrlRuntimeError(f"no member {expr.member}", expr)
@@ -479,14 +479,6 @@ def literal_path(expr: ast.Expr) -> bool:
         return literal_path(expr.base)
     if isinstance(expr, ast.Index):
         return all(isinstance(i, ast.IntLit) for i in expr.indices) and literal_path(expr.base)
-    return False
-
-
-def _is_lvalue(expr: ast.Expr) -> bool:
-    if isinstance(expr, ast.Name):
-        return True
-    if isinstance(expr, ast.Member | ast.Index):
-        return _is_lvalue(expr.base)
     return False
 
 

@@ -19,8 +19,9 @@ See docs/c3bridge.md.
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING, Any
+
+from .. import lazy
 
 if TYPE_CHECKING:
     from .constants import (
@@ -76,16 +77,11 @@ _SOURCES = {
 
 
 def __getattr__(name: str) -> Any:
-    source = _SOURCES.get(name)
-    if source is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.{source}"), name)
-    globals()[name] = value
-    return value
+    return lazy.load(__name__, _SOURCES, globals(), name)
 
 
 def __dir__() -> list[str]:
-    return sorted({*globals(), *_SOURCES})
+    return lazy.names(_SOURCES, globals())
 
 
 __all__ = [
