@@ -17,14 +17,15 @@ import pytest
 
 from kukavarproxy_emu import Emulator
 from kukavarproxy_emu.abuse_modes import big_module
-from kukavarproxy_emu.c3 import HANDLED, VERSION
+from kukavarproxy_emu.c3 import HANDLED, VERSION, C3Session
 from kukavarproxy_emu.testing import EmulatorFactory, RawClient, wait_until
 from pyopenshowvar.c3.constants import ErrorCode
 from pyopenshowvar.c3.files import FileWriteBegin, FileWriteData
 from pyopenshowvar.c3.messages import ProgramControl, ProgramSelect
 from pyopenshowvar.c3.replies import Outcome, ProxyInfoReply
 from pyopenshowvar.c3.wire import Reader
-from pyopenshowvar.protocol import decode_reply, encode_read
+from pyopenshowvar.errors import ProtocolError
+from pyopenshowvar.protocol import Request, decode_reply, encode_read
 
 H = bytes.fromhex
 
@@ -671,12 +672,13 @@ async def test_the_servers_clock_is_utc_on_a_machine_in_another_zone(raw: RawCli
     assert abs((dt.datetime.now(dt.UTC) - stamp.replace(tzinfo=dt.UTC)).total_seconds()) < 60
 
 
-async def test_a_deferred_answer_that_fails_is_error_general_and_logged(
+async def test_an_emulator_error_is_error_general_and_logged(
     c3: Emulator, raw: RawClient, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:
     """docs/c3bridge.md: an error of the emulator itself answers ErrorGeneral and is logged,
-    also for an answer that comes later (a motion, a benchmark), and the connection stays.
-    The bugs are planted here: a motion and the server's tick that raise."""
+    at once (a key, a confirmation) or later (a motion, a benchmark), with the echoed command
+    byte where the message has one; the connection stays. The bugs are planted here: a key,
+    the confirmation, a motion and the server's tick that raise."""
     assert c3.c3 is not None
 
     def broken_motion(kind: int, position: str) -> object:
@@ -688,16 +690,36 @@ async def test_a_deferred_answer_that_fails_is_error_general_and_logged(
     def broken_tick() -> int:
         raise RuntimeError("planted tick bug")
 
+    def broken(*args: object) -> int:
+        raise RuntimeError("planted bug")
+
     monkeypatch.setattr(c3.c3.control, "motion", broken_motion)
     monkeypatch.setattr(c3.c3, "tick_ms", broken_tick)
+    monkeypatch.setattr(c3.c3.control, "key", broken)
+    monkeypatch.setattr(c3.c3.control, "confirm_all", broken)
     with caplog.at_level(logging.WARNING, logger="kukavarproxy_emu"):
+        key = frame(4, 12, H("02") + struct.pack(">iiBB", 1, 0, 0, 0))
+        assert await raw.request(key) == answer(4, 12, H("02"), ErrorCode.GENERAL)  # its byte
+        assert await raw.request(frame(5, 63, H("00"))) == answer(5, 63, b"", ErrorCode.GENERAL)
         motion = frame(1, 11, H("02") + W("{A1 1.0}"))
         assert await raw.request(motion) == answer(1, 11, H("02"), ErrorCode.GENERAL)  # echoed
         bench = frame(2, 17, H("00 01 00000001") + W("RULE_A"))
         assert await raw.request(bench) == answer(2, 17, b"", ErrorCode.GENERAL)  # nothing
+        # a motion that waits for a select still loading, and then fails
+        c3.c3.vfs.write("KRC:\\R1\\Program\\SLOW.SRC", big_module("SLOW", 5000), overwrite=True)
+        async with await RawClient.connect(c3.host, c3.port) as other:
+            await other.send(ProgramSelect("/R1/SLOW").frame(1))
+            await wait_until(lambda: c3.c3 is not None and c3.c3.control.selecting, what="select")
+            motion = frame(6, 11, H("02") + W("{A1 1.0}"))
+            assert await raw.request(motion, timeout=30) == answer(
+                6, 11, H("02"), ErrorCode.GENERAL
+            )
+            assert await other.read_frame(timeout=30) == answer(1, 10, H("05"), 1)
         assert await raw.request(frame(3, 4, W("RULE_A"))) == answer(3, 4, W("1"), 1)  # still open
     failed = [r for r in caplog.records if "failed; answering ErrorGeneral" in r.getMessage()]
-    assert [r.getMessage()[:15] for r in failed] == ["C3 message #11 ", "C3 message #17 "]
+    assert [r.getMessage()[:15] for r in failed] == [
+        f"C3 message #{n} " for n in (12, 63, 11, 17, 11)
+    ]
     assert all(r.exc_info is not None and "planted" in str(r.exc_info[1]) for r in failed)
 
 
@@ -712,3 +734,23 @@ async def test_a_cut_short_ascii_message_is_a_failure_not_an_emulator_error(
             reply = await raw.request(frame(tag, n, payload))
             assert reply == frame(tag, n, H("0000 0000 00")), payload
     assert not [r for r in caplog.records if "ErrorGeneral" in r.getMessage()]
+
+
+def test_why_a_message_closes_the_connection_is_said(c3: Emulator) -> None:
+    """The three messages C3 Bridge disconnects on raise a ProtocolError that names the rule
+    (the connection logs it as its reason for closing): no type byte, a type without a
+    handler, an answer no message can carry (ErrorBuildMessage)."""
+    assert c3.c3 is not None
+    with pytest.raises(ProtocolError) as empty:
+        C3Session.decode(H("0001 0000"))
+    assert str(empty.value) == "message with length 0 (no type byte): C3 Bridge disconnects"
+    session = c3.c3.session()
+    with pytest.raises(ProtocolError) as unhandled:
+        session.answer(Request(1, 2, "", b""), 1)
+    assert str(unhandled.value) == "message type 2 has no handler: C3 Bridge disconnects"
+    c3.store.declare("BIG", "INT", (40_000,), "0")  # an array no answer can carry
+    with pytest.raises(ProtocolError) as too_long:
+        session.answer(Request(1, 4, "", W("BIG[]")), 1)
+    text = str(too_long.value)
+    assert text.startswith("the answer to message #4 does not fit one message (")
+    assert text.endswith("): C3 Bridge disconnects (ErrorBuildMessage)")
