@@ -117,3 +117,46 @@ async def test_a_robot_that_is_not_connected_gets_no_write(ideal_emulator: Emula
         await kvp.close()
         lost = await _code(_Poller(cfg, kvp), "$OV_PRO", "30")
         assert lost == ua.StatusCodes.BadCommunicationError
+
+
+async def _refusal(poller: _Poller, name: object, literal: object) -> str:
+    """What the gateway logs as the reason of a refused write (the client sees its code)."""
+    with pytest.raises(WriteError) as refused:
+        await write_variable(poller, name, literal)  # type: ignore[arg-type]
+    return str(refused.value)
+
+
+async def test_each_refusal_says_which_robot_and_why(ideal_emulator: Emulator) -> None:
+    async with Client("127.0.0.1", ideal_emulator.port) as kvp:
+        cfg = replace(CFG, port=ideal_emulator.port)
+        poller = _Poller(cfg, kvp)
+        assert await _refusal(poller, 5, "1") == "r1: bad arguments"
+        assert await _refusal(poller, "$OV_JOG", "1") == (
+            "r1: '$OV_JOG' is not listed writable in the cell file"
+        )
+        text = await _refusal(poller, "$OV_PRO", "{A1")
+        assert text.startswith("r1: '{A1' is not a KRL literal: ") and len(text) > 32
+        assert await _refusal(_Poller(cfg, kvp, connected=False), "$OV_PRO", "1") == (
+            "r1 is not connected"
+        )
+        text = await _refusal(poller, "$OV_PRO", "#T1")
+        assert text.startswith("r1: write refused: '$OV_PRO'") and "wrong type" in text
+        assert (await _refusal(poller, "$KR_SERIALNO", "5")).startswith(
+            "r1: write refused: '$KR_SERIALNO'"
+        )
+        await kvp.close()
+        assert (await _refusal(poller, "$OV_PRO", "30")).startswith("r1: ")
+
+
+async def test_a_write_that_stops_the_program_is_echoed_with_the_stop(
+    ideal_emulator: Emulator, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Beyond a software limit: written (the echo), and the program stop described beside it,
+    as ``kvp write`` reports it (its exit 7), and logged."""
+    async with Client("127.0.0.1", ideal_emulator.port) as kvp:
+        poller = _Poller(replace(CFG, port=ideal_emulator.port), kvp)
+        with caplog.at_level(logging.INFO, logger="pyopenshowvar_apps.gateway.writes"):
+            echo, stop = await write_variable(poller, "MYAXIS", "{A1 9999.0}")  # type: ignore[arg-type]
+        assert "9999" in echo and "#P_STOP" in stop
+        line = [r.getMessage() for r in caplog.records if r.name.endswith("gateway.writes")]
+        assert len(line) == 1 and line[0].endswith(f"; the program stopped: {stop}")
