@@ -14,9 +14,9 @@ from dataclasses import dataclass, replace
 import pytest
 
 pytest.importorskip("asyncua")
-from asyncua import ua
+from asyncua import Server, ua
 from pyopenshowvar_apps.gateway.cell import RobotConfig
-from pyopenshowvar_apps.gateway.writes import WriteError, write_variable
+from pyopenshowvar_apps.gateway.writes import WriteError, add_write_method, write_variable
 
 from kukavarproxy_emu import Emulator
 from pyopenshowvar import Client
@@ -160,3 +160,45 @@ async def test_a_write_that_stops_the_program_is_echoed_with_the_stop(
         assert "9999" in echo and "#P_STOP" in stop
         line = [r.getMessage() for r in caplog.records if r.name.endswith("gateway.writes")]
         assert len(line) == 1 and line[0].endswith(f"; the program stopped: {stop}")
+
+
+@pytest.mark.timeout(60)
+async def test_the_opc_ua_method_its_arguments_and_its_answers(ideal_emulator: Emulator) -> None:
+    """``WriteVariable`` as an OPC UA client meets it, on an in-process asyncua server (not
+    started: the method is called through the server's own session): its argument names and
+    types, two strings out, and a refusal as the status code of the call. Over 3 s: asyncua
+    loads its standard address space first (7 s on the shared 2-core machine at load 10), the
+    only way to meet the method without a whole gateway; tests/test_gateway_e2e.py calls it
+    over the network, in a gateway that takes longer still to start."""
+    server = Server()
+    await server.init()
+    ns = await server.register_namespace("urn:test:writes")
+    ctrl = await server.nodes.objects.add_object(ua.NodeId("r1", ns), ua.QualifiedName("r1", ns))
+    async with Client("127.0.0.1", ideal_emulator.port) as kvp:
+        poller = _Poller(replace(CFG, port=ideal_emulator.port), kvp)
+        method_id = ua.NodeId("r1.WriteVariable", ns)
+        await add_write_method(ctrl, method_id, ns, poller)  # type: ignore[arg-type]
+        method = server.get_node(method_id)
+        assert await method.read_browse_name() == ua.QualifiedName("WriteVariable", ns)
+        args = {
+            (await node.read_browse_name()).Name: await node.read_value()
+            for node in await method.get_children()
+        }
+        string = ua.NodeId(ua.ObjectIds.String)
+        for key, names, texts in (
+            ("InputArguments", ["Variable", "Value"], ["$OV_PRO", "50 or {A1 10.0}"]),
+            ("OutputArguments", ["Echo", "ProgramStop"], ["answered", "stopped"]),
+        ):
+            assert [a.Name for a in args[key]] == names
+            assert all(a.DataType == string and a.ValueRank == -1 for a in args[key])
+            assert all(t in a.Description.Text for a, t in zip(args[key], texts, strict=True))
+        assert await ctrl.call_method(method_id, "$OV_PRO", "40") == ["40", ""]
+        assert await kvp.read("$OV_PRO") == "40"
+        with pytest.raises(ua.UaStatusCodeError) as refused:
+            await ctrl.call_method(method_id, "$OV_JOG", "40")
+        assert refused.value.code == ua.StatusCodes.BadUserAccessDenied
+        with pytest.raises(ua.UaStatusCodeError) as bad:
+            await ctrl.call_method(method_id, "$OV_PRO", "#T1")
+        assert bad.value.code == ua.StatusCodes.BadTypeMismatch
+        echo, stop = await ctrl.call_method(method_id, "MYAXIS", "{A1 9999.0}")
+        assert "9999" in echo and "#P_STOP" in stop
