@@ -80,6 +80,9 @@ def test_a_poll_exactly_at_its_budget_is_not_delayed(caplog: pytest.LogCaptureFi
 def test_the_budget_defaults_are_the_documented_ones() -> None:
     budget = WorkBudget("r")
     assert (budget.share, budget.slice, budget.clock) == (SHARE, SLICE, time.thread_time)
+    # a new robot's budget has spent nothing yet: no slice is due, the next poll is on time
+    assert budget.used == 0.0 and not budget.should_yield()
+    assert budget.earliest_next(5.0, 0.1) == 5.0
     assert (SHARE, SLICE) == (0.05, 0.002)
 
 
