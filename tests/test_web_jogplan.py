@@ -83,6 +83,9 @@ def test_a_step_is_equal_increments_and_the_credit_stops_at_its_end() -> None:
     # a step shorter than one increment is one shorter increment
     plan = plan_jog(JogRequest("axis", "A6", -1, 0.1, 100.0), KR6R900SIXX)
     assert plan.count == 1 and plan.increment[5] == -0.1
+    # a tiny step: its number in exponent form, which needs no ".0" to be a REAL
+    plan = plan_jog(JogRequest("axis", "A1", 1, 1e-6, 100.0), KR6R900SIXX)
+    assert plan.literal == "{A1 1e-06, A2 0.0, A3 0.0, A4 0.0, A5 0.0, A6 0.0}"
     # continuous: the credit from what the robot has seen
     assert plan_jog(JogRequest("axis", "A1", 1), KR6R900SIXX).until(10, 12, 5) == 17
 
