@@ -124,4 +124,4 @@ def test_requests_out_of_bounds_are_refused_with_the_rule(
 
 def test_requests_at_their_bounds_are_taken() -> None:
     for kw in ({"step": 10.0}, {"step": 1e-6}, {"override": 1.0}, {"override": 100.0}):
-        JogRequest("axis", "A1", -1, **kw)  # type: ignore[arg-type]
+        JogRequest("axis", "A1", -1, **kw)
