@@ -16,7 +16,7 @@ import pytest
 
 pytest.importorskip("asyncua")
 from pyopenshowvar_apps.gateway.abuse import hostile_text
-from pyopenshowvar_apps.gateway.budget import MAX_VALUE_CHARS, WorkBudget
+from pyopenshowvar_apps.gateway.budget import MAX_VALUE_CHARS, SHARE, SLICE, WorkBudget
 from pyopenshowvar_apps.gateway.cell import CellError, parse_cell
 from pyopenshowvar_apps.gateway.server import Gateway
 
@@ -64,6 +64,26 @@ def test_a_poll_over_budget_delays_the_next_one(caplog: pytest.LogCaptureFixture
     with caplog.at_level(logging.WARNING, logger="pyopenshowvar_apps.gateway.budget"):
         budget.earliest_next(12.0, 0.1)
     assert len(caplog.records) == 2
+
+
+def test_a_poll_exactly_at_its_budget_is_not_delayed(caplog: pytest.LogCaptureFixture) -> None:
+    """At most SHARE of the time until the next poll: exactly that share is within budget
+    (numbers exact in binary, so the comparison is at equality)."""
+    budget = WorkBudget("r", share=0.5, clock=Clock())
+    budget.begin()
+    budget.charge(0.25)  # a quarter second of a half-second period at a 50 % share
+    with caplog.at_level(logging.WARNING, logger="pyopenshowvar_apps.gateway.budget"):
+        assert budget.earliest_next(10.0, 0.5) == 10.0
+    assert not caplog.records
+
+
+def test_the_budget_defaults_are_the_documented_ones() -> None:
+    budget = WorkBudget("r")
+    assert (budget.share, budget.slice, budget.clock) == (SHARE, SLICE, time.thread_time)
+    # a new robot's budget has spent nothing yet: no slice is due, the next poll is on time
+    assert budget.used == 0.0 and not budget.should_yield()
+    assert budget.earliest_next(5.0, 0.1) == 5.0
+    assert (SHARE, SLICE) == (0.05, 0.002)
 
 
 def test_the_value_cap_is_configurable_within_bounds() -> None:

@@ -6,21 +6,26 @@ source, so a changed rule fails here."""
 from __future__ import annotations
 
 import asyncio
+import datetime as dt
 import logging
 import random
 import struct
+import time
+from collections.abc import Iterator
 
 import pytest
 
 from kukavarproxy_emu import Emulator
 from kukavarproxy_emu.abuse import big_module
-from kukavarproxy_emu.c3 import HANDLED, VERSION
+from kukavarproxy_emu.c3 import HANDLED, VERSION, C3Session
 from kukavarproxy_emu.testing import EmulatorFactory, RawClient, wait_until
 from pyopenshowvar.c3.constants import ErrorCode
 from pyopenshowvar.c3.files import FileWriteBegin, FileWriteData
 from pyopenshowvar.c3.messages import ProgramControl, ProgramSelect
-from pyopenshowvar.c3.replies import Outcome
-from pyopenshowvar.protocol import decode_reply, encode_read
+from pyopenshowvar.c3.replies import Outcome, ProxyInfoReply
+from pyopenshowvar.c3.wire import Reader
+from pyopenshowvar.errors import ProtocolError
+from pyopenshowvar.protocol import Request, decode_reply, encode_read
 
 H = bytes.fromhex
 
@@ -435,6 +440,35 @@ async def test_benchmark_times_with_the_servers_tick(c3: Emulator, raw: RawClien
     assert c3.c3.tick_ms() - after >= 45  # it counts milliseconds
 
 
+async def test_benchmark_writes_its_values_within_10000_store_operations(
+    c3: Emulator, raw: RawClient
+) -> None:
+    """#17 (docs/c3bridge.md): a write benchmark writes each name's own value; the work is at
+    most 10 000 store operations, the reply says how many iterations were done, and its
+    elapsed time is that of all of them."""
+    from pyopenshowvar.c3.replies import BenchmarkReply
+
+    async def bench(tag: int, payload: bytes) -> BenchmarkReply:
+        out = decode_reply(await raw.request(frame(tag, 17, payload), timeout=20))
+        assert out.ok, out
+        return BenchmarkReply.parse(Outcome.of(out).reader())
+
+    two = W("RULE_A") + W("41") + W("RULE_B") + W("42")
+    reply = await bench(1, H("01 02 00000003") + two)
+    assert (reply.write, reply.count, reply.iterations) == (True, 2, 3)
+    assert (c3.store.read("RULE_A"), c3.store.read("RULE_B")) == ("41", "42")
+    assert (await bench(2, H("00 00 0000FFFF"))).iterations == 10_000  # nothing to do
+    assert (await bench(3, H("00 03 0000FFFF") + W("RULE_A") * 3)).iterations == 3_333
+    # one name: 10 000 reads of the arm's axes, milliseconds of store time in all (the last
+    # iteration alone is microseconds)
+    reply = await bench(4, H("00 01 FFFFFFFF") + W("$AXIS_ACT"))
+    assert (reply.count, reply.iterations) == (1, 10_000)
+    assert reply.elapsed_ms >= 2 and reply.stop_ms - reply.start_ms == reply.elapsed_ms
+    # cut short before its iterations: the count parsed so far, capped at 10
+    cut = await raw.request(frame(5, 17, H("00 0C 0000")))
+    assert cut == answer(5, 17, H("00 0A 00000000 00000000 00000000 00000000"), ErrorCode.PROTOCOL)
+
+
 # ------------------------------------------------------------------------ file rules
 
 
@@ -596,7 +630,6 @@ async def test_a_start_or_stop_key_acts_on_the_interpreter_it_names(raw: RawClie
 
 async def test_the_servers_own_variables(c3: Emulator, raw: RawClient) -> None:
     """Spec §3.5.1: the internal variables a C3 client may read (by their exact names)."""
-    import datetime as dt
 
     async def read(tag: int, name: str) -> tuple[str, int]:
         reply = decode_reply(await raw.request(frame(tag, 4, W(name))))
@@ -611,3 +644,113 @@ async def test_the_servers_own_variables(c3: Emulator, raw: RawClient) -> None:
     stamp = dt.datetime.strptime(text, "%Y-%m-%dT%H:%M:%SZ").replace(tzinfo=dt.UTC)
     assert code == ErrorCode.SUCCESS
     assert abs((dt.datetime.now(dt.UTC) - stamp).total_seconds()) < 60  # UTC, not local time
+
+
+@pytest.fixture
+def local_time_not_utc(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+    """This process's local time zone at UTC+9 for one test (POSIX TZ, no tz database
+    needed), so that a clock read in local time cannot pass for UTC."""
+    monkeypatch.setenv("TZ", "XST-9")
+    time.tzset()
+    yield
+    monkeypatch.undo()
+    time.tzset()
+
+
+@pytest.mark.usefixtures("local_time_not_utc")
+async def test_the_servers_clock_is_utc_on_a_machine_in_another_zone(raw: RawClient) -> None:
+    """#13's SYSTEMTIME and @PROXY_TIME are UTC (spec §3.5.1), whatever the local zone."""
+    assert dt.datetime.now().utcoffset() is None and time.localtime().tm_gmtoff == 9 * 3600
+    info = decode_reply(await raw.request(frame(1, 13)))
+    parsed = ProxyInfoReply.parse(Reader(info.value))
+    assert info.ok and parsed.computer_name == "KRC4-EMULATOR"
+    assert abs((dt.datetime.now(dt.UTC) - parsed.time).total_seconds()) < 60
+    weekday = int.from_bytes(info.value[7:9], "big")  # SYSTEMTIME: Sunday is 0
+    assert weekday == parsed.time.isoweekday() % 7
+    reply = decode_reply(await raw.request(frame(2, 4, W("@PROXY_TIME"))))
+    stamp = dt.datetime.strptime(reply.value[2:].decode("utf-16-le"), "%Y-%m-%dT%H:%M:%SZ")
+    assert abs((dt.datetime.now(dt.UTC) - stamp.replace(tzinfo=dt.UTC)).total_seconds()) < 60
+
+
+async def test_an_emulator_error_is_error_general_and_logged(
+    c3: Emulator, raw: RawClient, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """docs/c3bridge.md: an error of the emulator itself answers ErrorGeneral and is logged,
+    at once (a key, a confirmation) or later (a motion, a benchmark), with the echoed command
+    byte where the message has one; the connection stays. The bugs are planted here: a key,
+    the confirmation, a motion and the server's tick that raise."""
+    assert c3.c3 is not None
+
+    def broken_motion(kind: int, position: str) -> object:
+        async def rest() -> int:
+            raise RuntimeError("planted motion bug")
+
+        return rest
+
+    def broken_tick() -> int:
+        raise RuntimeError("planted tick bug")
+
+    def broken(*args: object) -> int:
+        raise RuntimeError("planted bug")
+
+    monkeypatch.setattr(c3.c3.control, "motion", broken_motion)
+    monkeypatch.setattr(c3.c3, "tick_ms", broken_tick)
+    monkeypatch.setattr(c3.c3.control, "key", broken)
+    monkeypatch.setattr(c3.c3.control, "confirm_all", broken)
+    with caplog.at_level(logging.WARNING, logger="kukavarproxy_emu"):
+        key = frame(4, 12, H("02") + struct.pack(">iiBB", 1, 0, 0, 0))
+        assert await raw.request(key) == answer(4, 12, H("02"), ErrorCode.GENERAL)  # its byte
+        assert await raw.request(frame(5, 63, H("00"))) == answer(5, 63, b"", ErrorCode.GENERAL)
+        motion = frame(1, 11, H("02") + W("{A1 1.0}"))
+        assert await raw.request(motion) == answer(1, 11, H("02"), ErrorCode.GENERAL)  # echoed
+        bench = frame(2, 17, H("00 01 00000001") + W("RULE_A"))
+        assert await raw.request(bench) == answer(2, 17, b"", ErrorCode.GENERAL)  # nothing
+        # a motion that waits for a select still loading, and then fails
+        c3.c3.vfs.write("KRC:\\R1\\Program\\SLOW.SRC", big_module("SLOW", 5000), overwrite=True)
+        async with await RawClient.connect(c3.host, c3.port) as other:
+            await other.send(ProgramSelect("/R1/SLOW").frame(1))
+            await wait_until(lambda: c3.c3 is not None and c3.c3.control.selecting, what="select")
+            motion = frame(6, 11, H("02") + W("{A1 1.0}"))
+            assert await raw.request(motion, timeout=30) == answer(
+                6, 11, H("02"), ErrorCode.GENERAL
+            )
+            assert await other.read_frame(timeout=30) == answer(1, 10, H("05"), 1)
+        assert await raw.request(frame(3, 4, W("RULE_A"))) == answer(3, 4, W("1"), 1)  # still open
+    failed = [r for r in caplog.records if "failed; answering ErrorGeneral" in r.getMessage()]
+    assert [r.getMessage()[:15] for r in failed] == [
+        f"C3 message #{n} " for n in (12, 63, 11, 17, 11)
+    ]
+    assert all(r.exc_info is not None and "planted" in str(r.exc_info[1]) for r in failed)
+
+
+async def test_a_cut_short_ascii_message_is_a_failure_not_an_emulator_error(
+    raw: RawClient, caplog: pytest.LogCaptureFixture
+) -> None:
+    """#0/#1 cut short are answered with the failure tail by their own rule, not through the
+    emulator-error path (which would log a traceback a client could provoke at will)."""
+    with caplog.at_level(logging.WARNING, logger="kukavarproxy_emu"):
+        for n, payload in enumerate((H("0009") + b"$OV", A("$OV_PRO") + H("0005") + b"1")):
+            tag = 1 + n
+            reply = await raw.request(frame(tag, n, payload))
+            assert reply == frame(tag, n, H("0000 0000 00")), payload
+    assert not [r for r in caplog.records if "ErrorGeneral" in r.getMessage()]
+
+
+def test_why_a_message_closes_the_connection_is_said(c3: Emulator) -> None:
+    """The three messages C3 Bridge disconnects on raise a ProtocolError that names the rule
+    (the connection logs it as its reason for closing): no type byte, a type without a
+    handler, an answer no message can carry (ErrorBuildMessage)."""
+    assert c3.c3 is not None
+    with pytest.raises(ProtocolError) as empty:
+        C3Session.decode(H("0001 0000"))
+    assert str(empty.value) == "message with length 0 (no type byte): C3 Bridge disconnects"
+    session = c3.c3.session()
+    with pytest.raises(ProtocolError) as unhandled:
+        session.answer(Request(1, 2, "", b""), 1)
+    assert str(unhandled.value) == "message type 2 has no handler: C3 Bridge disconnects"
+    c3.store.declare("BIG", "INT", (40_000,), "0")  # an array no answer can carry
+    with pytest.raises(ProtocolError) as too_long:
+        session.answer(Request(1, 4, "", W("BIG[]")), 1)
+    text = str(too_long.value)
+    assert text.startswith("the answer to message #4 does not fit one message (")
+    assert text.endswith("): C3 Bridge disconnects (ErrorBuildMessage)")
