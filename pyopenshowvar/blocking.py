@@ -114,9 +114,22 @@ class BlockingConnection(LinkBase[_Outcome]):
         entry = self._reads.get(name) or self._read_entry(name)
         if entry is None:
             return None
-        tail, prefix = entry
-        if timeout is None:
-            timeout = self.timeout
+        return self._idle_request(
+            name, entry[0], entry[1], self.timeout if timeout is None else timeout, True
+        )
+
+    def _idle_request(
+        self, name: str, tail: bytes, prefix: bytes | None, timeout: float, text: bool
+    ) -> str | Reply | None:
+        """Send the request ``tail`` (a frame without its id) on an idle connection and return
+        its answer without queueing it first; None, with nothing sent, when the connection is
+        not idle (closed, requests pending, bytes buffered).
+
+        With ``text`` (a read) a successful reply with a non-empty value, whole and alone in
+        the first recv, is returned as its text, checked against ``prefix`` (the variable's
+        known shape) or by the session; any other answer is a :class:`Reply` from
+        :meth:`_finish_idle`. Raises what :meth:`request` raises.
+        """
         lock = self.lock
         lock.acquire()  # not `with`: its __exit__ call costs twice an acquire and a release
         try:
@@ -140,7 +153,7 @@ class BlockingConnection(LinkBase[_Outcome]):
             except OSError:
                 data = b""  # timed out or lost: the general path meets it again and decides
             size = len(data)
-            if size > 10:
+            if text and size > 10:
                 rid, length, mode, n = _HEAD.unpack_from(data)
                 # one whole reply with our id, mode 0, success and a non-empty value
                 if (
@@ -189,29 +202,16 @@ class BlockingConnection(LinkBase[_Outcome]):
     def _exchange(self, name: str, frame0: bytes, timeout: float | None) -> Reply:
         """:meth:`request`; on an idle connection, without queueing the request first."""
         timeout = self.timeout if timeout is None else timeout
-        with self.lock:
-            session = self.session
-            if len(frame0) > session.pipeline_bytes:
-                session.check_size(name, frame0)
-            sock = self._sock
-            if sock is None or self._closed_reason is not None or session.queue or self._partial:
+        session = self.session
+        if len(frame0) > session.pipeline_bytes:
+            session.check_size(name, frame0)
+        reply = self._idle_request(name, frame0[2:], None, timeout, False)
+        if reply is None:  # not idle: queue it behind the others
+            with self.lock:
                 self._check_open()
                 return self._request_queued(name, frame0, timeout)
-            if self._sock_timeout != timeout:
-                self._fit_timeout(timeout)
-            msg_id = session.next_id  # an idle connection: no id is pending
-            session.next_id = (msg_id + 1) & 0xFFFF
-            frame = _ID.pack(msg_id) + frame0[2:]
-            self._last_activity = sent_at = _clock()
-            try:
-                sock.sendall(frame)
-            except OSError as exc:
-                self._send_failed(exc)
-            try:
-                data = sock.recv(65536)
-            except OSError:
-                data = b""  # timed out or lost: the general path meets it again and decides
-            return self._finish_idle(name, frame, data, sent_at, timeout)
+        assert isinstance(reply, Reply)  # not a read's text: ``text`` was False
+        return reply
 
     def _finish_idle(
         self, name: str, frame: bytes, data: bytes, sent_at: float, timeout: float
