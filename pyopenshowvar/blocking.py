@@ -8,7 +8,7 @@ loop, no thread per call. A lock makes one connection safe to share between thre
 Timeouts are kernel socket timeouts (``SO_RCVTIMEO``/``SO_SNDTIMEO``), set only when the
 call's timeout changes, so a serial read costs one ``send`` and one ``recv`` system call, as in
 the plainest client; Python's own socket timeouts would add a ``poll`` to every call.
-A serial read on an idle connection (:meth:`BlockingConnection.read_text`) is checked and
+A serial read on an idle connection (:meth:`BlockingConnection.idle_request`) is checked and
 returned straight from its one recv when its reply comes whole and alone; any other case falls
 back to the queue, the decoder and the general matching rules.
 Keep-alive, when enabled, is a daemon thread that pings only while the connection is idle and
@@ -64,7 +64,7 @@ class BlockingConnection(LinkBase[_Outcome]):
         self._stop = threading.Event()
         #: the decoder holds part of a reply (kept by _dispatch: cheaper than asking it)
         self._partial = False
-        #: read requests by name, without their id, and their values' prefix (see read_text)
+        #: read requests by name, without their id, and their values' prefix (see idle_request)
         self._reads: dict[str, tuple[bytes, bytes | None]] = {}
 
     @property
@@ -102,34 +102,31 @@ class BlockingConnection(LinkBase[_Outcome]):
         """Send one request and wait for its reply (raises its error)."""
         return self._exchange(name, frame0, timeout)
 
-    def read_text(self, name: str, timeout: float | None) -> str | Reply | None:
-        """The serial read of :meth:`pyopenshowvar.sync.Client.read`, for an idle connection.
-
-        None when it does not apply (closed, requests pending, bytes buffered, a request too
-        large): nothing was sent and the caller takes the general path. Otherwise the request
-        was sent and answered: the text of a successful read with a non-empty value, or the
-        :class:`Reply` of any other answer for the caller to interpret. Raises what
-        :meth:`request` raises.
-        """
-        entry = self._reads.get(name) or self._read_entry(name)
-        if entry is None:
-            return None
-        return self._idle_request(
-            name, entry[0], entry[1], self.timeout if timeout is None else timeout, True
-        )
-
-    def _idle_request(
-        self, name: str, tail: bytes, prefix: bytes | None, timeout: float, text: bool
+    def idle_request(
+        self, name: str, timeout: float | None, tail: bytes | None = None
     ) -> str | Reply | None:
-        """Send the request ``tail`` (a frame without its id) on an idle connection and return
-        its answer without queueing it first; None, with nothing sent, when the connection is
-        not idle (closed, requests pending, bytes buffered).
+        """One request on an idle connection, sent and answered without being queued: the
+        serial read of :meth:`pyopenshowvar.sync.Client.read` and the first try of
+        :meth:`request`.
 
-        With ``text`` (a read) a successful reply with a non-empty value, whole and alone in
-        the first recv, is returned as its text, checked against ``prefix`` (the variable's
-        known shape) or by the session; any other answer is a :class:`Reply` from
-        :meth:`_finish_idle`. Raises what :meth:`request` raises.
+        Without ``tail`` it reads ``name`` and returns the text of a successful read with a
+        non-empty value, or the :class:`Reply` of any other answer for the caller to
+        interpret. With ``tail`` (a request frame without its two id bytes) it sends that and
+        returns its :class:`Reply`. None when the connection is not idle (closed, requests
+        pending, bytes buffered) or the read request is too large: nothing was sent and the
+        caller takes the general path. Raises what :meth:`request` raises.
         """
+        if tail is None:
+            entry = self._reads.get(name) or self._read_entry(name)
+            if entry is None:
+                return None
+            tail, prefix = entry
+            text = True
+        else:
+            prefix = None
+            text = False
+        if timeout is None:
+            timeout = self.timeout
         lock = self.lock
         lock.acquire()  # not `with`: its __exit__ call costs twice an acquire and a release
         try:
@@ -205,12 +202,12 @@ class BlockingConnection(LinkBase[_Outcome]):
         session = self.session
         if len(frame0) > session.pipeline_bytes:
             session.check_size(name, frame0)
-        reply = self._idle_request(name, frame0[2:], None, timeout, False)
+        reply = self.idle_request(name, timeout, frame0[2:])
         if reply is None:  # not idle: queue it behind the others
             with self.lock:
                 self._check_open()
                 return self._request_queued(name, frame0, timeout)
-        assert isinstance(reply, Reply)  # not a read's text: ``text`` was False
+        assert isinstance(reply, Reply)  # given a tail, never a text
         return reply
 
     def _finish_idle(
