@@ -45,8 +45,10 @@ _READS_MAX = 256
 _clock = time.perf_counter
 
 
-def _timeval(seconds: float) -> bytes:
-    if sys.platform == "win32":  # pragma: no cover - a DWORD of milliseconds on Windows
+def _timeval(seconds: float, windows: bool = sys.platform == "win32") -> bytes:
+    """SO_RCVTIMEO/SO_SNDTIMEO for ``seconds``, never 0 (which means "wait forever"): a
+    ``struct timeval``, or on Windows a DWORD of milliseconds."""
+    if windows:
         return struct.pack("I", max(1, int(seconds * 1000)))
     sec = int(seconds)
     usec = max(1, int((seconds - sec) * 1e6)) if sec == 0 else int((seconds - sec) * 1e6)
