@@ -11,7 +11,8 @@ scheduler dominate; this script puts the two clients side by side and takes thei
    several µs between runs;
 2. **the client's CPU per read against the emulator** (user + system time of this process,
    in alternating blocks of reads): what the client and the kernel's side of its two system
-   calls cost, net of the emulator (a separate process);
+   calls cost, net of the emulator (a separate process), next to a bare socket's ``sendall``
+   and ``recv`` of the same request (the floor under both clients);
 3. **without the network**: ``read("$AXIS_ACT")`` on a connected client whose socket is
    replaced by an in-process fake that answers at once with the right id (the same fake for
    both clients): the client's own CPU per read (``process_time``, best and median of
@@ -35,6 +36,7 @@ from __future__ import annotations
 import os
 import re
 import shutil
+import socket
 import subprocess
 import sys
 import tempfile
@@ -49,7 +51,7 @@ from _common import EmuProcess, Row, base_parser, median, print_rows, write_json
 
 from pyopenshowvar import sync
 from pyopenshowvar.blocking import BlockingConnection
-from pyopenshowvar.protocol import Mode, Reply, encode_reply
+from pyopenshowvar.protocol import Mode, Reply, encode_read, encode_reply
 
 try:
     import py_openshowvar
@@ -176,13 +178,21 @@ def _interleaved(port: int, rounds: int) -> dict[str, float]:
 
 def _cpu_on_emulator(port: int, blocks: int, block: int = 500) -> dict[str, float]:
     """CPU seconds (user + system) of this process per read, each client in alternating blocks
-    of ``block`` reads; the median block. The emulator runs in another process."""
+    of ``block`` reads; the median block. The emulator runs in another process. ``raw`` is a
+    bare socket's ``sendall`` + ``recv`` of the same request: the floor under both clients."""
     ours, peer, close = _pair(port)
-    clients: list[tuple[str, Callable[[], object]]] = [("ours", ours), ("peer", peer)]
-    cpu: dict[str, list[float]] = {"ours": [], "peer": []}
+    bare = socket.create_connection(("127.0.0.1", port))
+    frame = encode_read(7, NAME)
+
+    def raw() -> object:
+        bare.sendall(frame)
+        return bare.recv(65536)
+
+    clients: list[tuple[str, Callable[[], object]]] = [("ours", ours), ("peer", peer), ("raw", raw)]
+    cpu: dict[str, list[float]] = {key: [] for key, _ in clients}
     try:
         for i in range(blocks + 1):
-            clients.reverse()
+            clients.insert(0, clients.pop())  # rotate: each takes every place in turn
             for key, read in clients:
                 t0 = time.process_time()
                 for _ in range(block):
@@ -191,6 +201,7 @@ def _cpu_on_emulator(port: int, blocks: int, block: int = 500) -> dict[str, floa
                     cpu[key].append((time.process_time() - t0) / block)
     finally:
         close()
+        bare.close()
     return {k: median(v) for k, v in cpu.items()}
 
 
@@ -382,8 +393,10 @@ def _emulator_rows(quick: bool, runs: int = 5) -> list[Row]:
             "µs",
             peer=cpu["peer"] * 1e6,
             peer_name="py-openshowvar",
-            note="the client's work and the kernel's side of its send and recv;"
-            " the emulator's CPU is not counted",
+            note="the client's work and the kernel's side of its send and recv (the emulator's"
+            f" CPU is not counted); a bare socket's sendall + recv: {cpu['raw'] * 1e6:.1f} µs,"
+            f" so the clients' own share: ours {(cpu['ours'] - cpu['raw']) * 1e6:.1f} µs,"
+            f" py-openshowvar {(cpu['peer'] - cpu['raw']) * 1e6:.1f} µs",
         ),
     ]
 
