@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import itertools
+import re
 import socket
 import struct
 import threading
@@ -27,6 +28,8 @@ from pyopenshowvar import (
     KvpStalledError,
     KvpTimeoutError,
     ProtocolError,
+    ReadFailedError,
+    UnknownVariableError,
     sync,
 )
 from pyopenshowvar.blocking import _timeval
@@ -143,7 +146,8 @@ def test_a_send_into_a_reset_connection_fails_loudly_and_closes_it(
         assert kvp.read("$OV_PRO") == "1"
         assert reset.wait(5.0)
         assert _poll(lambda: _peer_gone(kvp))
-        with pytest.raises(KvpConnectionError, match=f"sending to 127.0.0.1:{port} failed: "):
+        failed = rf"sending to 127\.0\.0\.1:{port} failed: \[Errno \d+\]"  # the OS's reason
+        with pytest.raises(KvpConnectionError, match=failed):
             kvp.write("$OV_PRO", "2")
         assert not kvp.connected
         assert kvp.connection is not None and "sending" in (kvp.connection.closed_reason or "")
@@ -583,7 +587,8 @@ def test_a_reset_while_waiting_fails_the_call_with_the_reason() -> None:
         thread.join(5.0)
 
 
-def test_a_value_smuggled_in_the_tail_of_a_cut_reply_is_never_taken() -> None:
+@pytest.mark.parametrize("head", [9, 1])
+def test_a_value_smuggled_in_the_tail_of_a_cut_reply_is_never_taken(head: int) -> None:
     """A proxy sends a reply together with the head of a reply to nothing; the rest, sent
     after the next request, is shaped like a whole reply to that request. With bytes of a
     frame buffered the connection is not idle: the next request goes through the decoder,
@@ -594,10 +599,13 @@ def test_a_value_smuggled_in_the_tail_of_a_cut_reply_is_never_taken() -> None:
     async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
         if req.name == "CUT":
             inner = encode_reply(Reply((req.msg_id + 1) & 0xFFFF, Mode.READ, b"v:EVIL"))
-            stray = encode_reply(Reply(0x7777, Mode.READ, b"xx" + inner[:-3]))
-            assert stray[9:] == inner  # the stray frame's tail is a whole reply
-            w.write(answer(req) + stray[:9])
-            rest.append(stray[9:])
+            if head == 9:  # the head of a reply to nothing, whose tail is a whole reply
+                stray = encode_reply(Reply(0x7777, Mode.READ, b"xx" + inner[:-3]))
+            else:  # one byte, then a whole reply: together no reply to this client
+                stray = b"\x00" + inner
+            assert stray[head:] == inner
+            w.write(answer(req) + stray[:head])
+            rest.append(stray[head:])
         elif rest:
             w.write(rest.pop())
             await w.drain()
@@ -606,9 +614,71 @@ def test_a_value_smuggled_in_the_tail_of_a_cut_reply_is_never_taken() -> None:
         else:
             w.write(answer(req))
 
-    with FakeProxy(handler) as port, sync.Client(port=port, timeout=1.0) as kvp:
+    with FakeProxy(handler) as port, sync.Client(port=port, timeout=0.3) as kvp:
         kvp.read("A")
         assert kvp.read("CUT") == "v:CUT"
-        with pytest.raises(KvpConnectionError, match="reply with id 30583 answers no request"):
-            kvp.read("NEXT")
+        if head == 9:
+            with pytest.raises(KvpConnectionError, match="reply with id 30583 answers no request"):
+                kvp.read("NEXT")
+            assert not kvp.connected
+        else:  # the decoder waits for the rest of a frame that never comes whole
+            with pytest.raises((KvpConnectionError, KvpTimeoutError)):
+                kvp.read("NEXT")
+
+
+@pytest.mark.parametrize(
+    ("code", "error"),
+    [(b"\x00\x00", UnknownVariableError), (b"\x00\x01", ReadFailedError)],
+    ids=["c3 general failure", "kvp failure"],
+)
+def test_the_code_of_a_failed_reply_on_the_idle_path_decides_the_error(
+    code: bytes, error: type[Exception]
+) -> None:
+    """C3 Bridge answers a name it cannot show with the code ``00 00`` (an unknown variable);
+    any other failed read is a failed read. The idle path reads the code from its two bytes."""
+
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        if req.name == "F":
+            w.write(encode_reply(Reply(req.msg_id, Mode.READ, b"", 0, code)))
+        else:
+            w.write(answer(req))
+
+    with FakeProxy(handler) as port, sync.Client(port=port, timeout=1.0) as kvp:
+        kvp.read("A")
+        with pytest.raises(error) as info:
+            kvp.read("F")
+        assert type(info.value) is error
+        assert kvp.read("B") == "v:B"
+
+
+@pytest.mark.parametrize("old_proxy", [False, True], ids=["ping", "ov_pro"])
+def test_ping_keeps_its_timeout(old_proxy: bool) -> None:
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        if req.name == "PING" and old_proxy:
+            w.write(answer(req, b""))  # an old proxy: PING is an unknown variable
+        elif req.name not in ("PING", "$OV_PRO") or n <= 2:  # n <= 2: the id probe
+            w.write(answer(req))
+
+    with FakeProxy(handler) as port, sync.Client(port=port, timeout=5.0) as kvp:
+        kvp.read("A")
+        t0 = time.monotonic()
+        name = "$OV_PRO" if old_proxy else "PING"
+        with pytest.raises(KvpTimeoutError, match=re.escape(f"no reply for '{name}'")):
+            kvp.ping(timeout=0.1)
+        assert time.monotonic() - t0 < 2.5
+
+
+def test_a_well_formed_reply_of_another_message_type_is_a_protocol_error() -> None:
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        if req.name == "X":
+            w.write(encode_reply(Reply(req.msg_id, 4, b"v:X", 1)))
+        else:
+            w.write(answer(req))
+
+    with FakeProxy(handler) as port, sync.Client(port=port, timeout=1.0) as kvp:
+        kvp.read("A")
+        with pytest.raises(
+            KvpConnectionError, match="has mode 4, but the request for 'X' had mode 0"
+        ):
+            kvp.read("X")
         assert not kvp.connected
