@@ -316,7 +316,7 @@ def run(quick: bool, repeat: int, callgrind: bool) -> tuple[list[Row], dict[str,
     extra: dict[str, Any] = {}
     if py_openshowvar is not None:
         rows += _emulator_rows(quick)
-    rows += _fake_rows(20_000 if quick else 200_000, repeat)
+    rows += _fake_rows(5_000 if quick else 200_000, repeat)
     if callgrind and shutil.which("valgrind") is not None:
         n = 200 if quick else 2000
         ours = _instructions_per_read("ours", n)
@@ -358,12 +358,12 @@ def run(quick: bool, repeat: int, callgrind: bool) -> tuple[list[Row], dict[str,
 def _emulator_rows(quick: bool, runs: int = 5) -> list[Row]:
     """The interleaved round trips (``runs`` runs, the median of their ratios) and the CPU
     per read against the emulator."""
-    rounds = 2000 if quick else 20_000
+    rounds = 400 if quick else 20_000
     results: list[dict[str, float]] = []
     with EmuProcess("--latency", "none") as emu:
         for _ in range(runs):
             results.append(_interleaved(emu.port, rounds))
-        cpu = _cpu_on_emulator(emu.port, 4 if quick else 20)
+        cpu = _cpu_on_emulator(emu.port, 2 if quick else 20, 100 if quick else 500)
     ratios = [r["ours"] / r["peer"] for r in results]
     return [
         Row(
