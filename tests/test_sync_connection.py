@@ -285,6 +285,22 @@ def test_keepalive_of_an_unused_connection_and_close(id_policy: Any) -> None:
         assert len(rec.seen) == count
 
 
+def test_keepalive_goes_on_after_a_call_held_the_connection() -> None:
+    """While a call holds the connection the keep-alive skips its checks; it must not give
+    up: pings resume once the connection is idle again."""
+    rec = _Recorder()
+
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        if req.name == "SLOW":
+            await asyncio.sleep(0.3)  # many of the keep-alive's 10 ms checks find it busy
+        await rec(req, w, n)
+
+    with FakeProxy(handler) as port, sync.Client(port=port, timeout=2.0, keepalive=0.1) as kvp:
+        assert kvp.read("SLOW") == "v:SLOW"
+        n = len(rec.names("PING"))
+        assert _poll(lambda: len(rec.names("PING")) >= n + 2)
+
+
 @pytest.mark.parametrize(
     ("pong", "first", "later"),
     [(b"PONG", ["PING"], ["PING"]), (b"", ["PING", "$OV_PRO"], ["$OV_PRO"])],
