@@ -8,7 +8,7 @@ loop, no thread per call. A lock makes one connection safe to share between thre
 Timeouts are kernel socket timeouts (``SO_RCVTIMEO``/``SO_SNDTIMEO``), set only when the
 call's timeout changes, so a serial read costs one ``send`` and one ``recv`` system call, as in
 the plainest client; Python's own socket timeouts would add a ``poll`` to every call.
-A serial read on an idle connection (:meth:`BlockingConnection.read_text`) is checked and
+A serial read on an idle connection (:meth:`BlockingConnection.idle_request`) is checked and
 returned straight from its one recv when its reply comes whole and alone; any other case falls
 back to the queue, the decoder and the general matching rules.
 Keep-alive, when enabled, is a daemon thread that pings only while the connection is idle and
@@ -45,8 +45,10 @@ _READS_MAX = 256
 _clock = time.perf_counter
 
 
-def _timeval(seconds: float) -> bytes:
-    if sys.platform == "win32":  # pragma: no cover - a DWORD of milliseconds on Windows
+def _timeval(seconds: float, windows: bool = sys.platform == "win32") -> bytes:
+    """SO_RCVTIMEO/SO_SNDTIMEO for ``seconds``, never 0 (which means "wait forever"): a
+    ``struct timeval``, or on Windows a DWORD of milliseconds."""
+    if windows:
         return struct.pack("I", max(1, int(seconds * 1000)))
     sec = int(seconds)
     usec = max(1, int((seconds - sec) * 1e6)) if sec == 0 else int((seconds - sec) * 1e6)
@@ -64,7 +66,7 @@ class BlockingConnection(LinkBase[_Outcome]):
         self._stop = threading.Event()
         #: the decoder holds part of a reply (kept by _dispatch: cheaper than asking it)
         self._partial = False
-        #: read requests by name, without their id, and their values' prefix (see read_text)
+        #: read requests by name, without their id, and their values' prefix (see idle_request)
         self._reads: dict[str, tuple[bytes, bytes | None]] = {}
 
     @property
@@ -102,19 +104,29 @@ class BlockingConnection(LinkBase[_Outcome]):
         """Send one request and wait for its reply (raises its error)."""
         return self._exchange(name, frame0, timeout)
 
-    def read_text(self, name: str, timeout: float | None) -> str | Reply | None:
-        """The serial read of :meth:`pyopenshowvar.sync.Client.read`, for an idle connection.
+    def idle_request(
+        self, name: str, timeout: float | None, tail: bytes | None = None
+    ) -> str | Reply | None:
+        """One request on an idle connection, sent and answered without being queued: the
+        serial read of :meth:`pyopenshowvar.sync.Client.read` and the first try of
+        :meth:`request`.
 
-        None when it does not apply (closed, requests pending, bytes buffered, a request too
-        large): nothing was sent and the caller takes the general path. Otherwise the request
-        was sent and answered: the text of a successful read with a non-empty value, or the
-        :class:`Reply` of any other answer for the caller to interpret. Raises what
-        :meth:`request` raises.
+        Without ``tail`` it reads ``name`` and returns the text of a successful read with a
+        non-empty value, or the :class:`Reply` of any other answer for the caller to
+        interpret. With ``tail`` (a request frame without its two id bytes) it sends that and
+        returns its :class:`Reply`. None when the connection is not idle (closed, requests
+        pending, bytes buffered) or the read request is too large: nothing was sent and the
+        caller takes the general path. Raises what :meth:`request` raises.
         """
-        entry = self._reads.get(name) or self._read_entry(name)
-        if entry is None:
-            return None
-        tail, prefix = entry
+        if tail is None:
+            entry = self._reads.get(name) or self._read_entry(name)
+            if entry is None:
+                return None
+            tail, prefix = entry
+            text = True
+        else:
+            prefix = None
+            text = False
         if timeout is None:
             timeout = self.timeout
         lock = self.lock
@@ -140,7 +152,7 @@ class BlockingConnection(LinkBase[_Outcome]):
             except OSError:
                 data = b""  # timed out or lost: the general path meets it again and decides
             size = len(data)
-            if size > 10:
+            if text and size > 10:
                 rid, length, mode, n = _HEAD.unpack_from(data)
                 # one whole reply with our id, mode 0, success and a non-empty value
                 if (
@@ -189,29 +201,16 @@ class BlockingConnection(LinkBase[_Outcome]):
     def _exchange(self, name: str, frame0: bytes, timeout: float | None) -> Reply:
         """:meth:`request`; on an idle connection, without queueing the request first."""
         timeout = self.timeout if timeout is None else timeout
-        with self.lock:
-            session = self.session
-            if len(frame0) > session.pipeline_bytes:
-                session.check_size(name, frame0)
-            sock = self._sock
-            if sock is None or self._closed_reason is not None or session.queue or self._partial:
+        session = self.session
+        if len(frame0) > session.pipeline_bytes:
+            session.check_size(name, frame0)
+        reply = self.idle_request(name, timeout, frame0[2:])
+        if reply is None:  # not idle: queue it behind the others
+            with self.lock:
                 self._check_open()
                 return self._request_queued(name, frame0, timeout)
-            if self._sock_timeout != timeout:
-                self._fit_timeout(timeout)
-            msg_id = session.next_id  # an idle connection: no id is pending
-            session.next_id = (msg_id + 1) & 0xFFFF
-            frame = _ID.pack(msg_id) + frame0[2:]
-            self._last_activity = sent_at = _clock()
-            try:
-                sock.sendall(frame)
-            except OSError as exc:
-                self._send_failed(exc)
-            try:
-                data = sock.recv(65536)
-            except OSError:
-                data = b""  # timed out or lost: the general path meets it again and decides
-            return self._finish_idle(name, frame, data, sent_at, timeout)
+        assert isinstance(reply, Reply)  # given a tail, never a text
+        return reply
 
     def _finish_idle(
         self, name: str, frame: bytes, data: bytes, sent_at: float, timeout: float

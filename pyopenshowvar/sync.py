@@ -130,7 +130,7 @@ class Client(SyncC3Methods, SyncRobotHelpers, ClientCore):
         KVP's empty-value-with-success answer, ``ReadFailedError`` for a failure status)."""
         conn = self._conn
         if conn is not None:  # the serial fast path first, without the retry wrapper
-            out = conn.read_text(name, timeout)
+            out = conn.idle_request(name, timeout)
             if isinstance(out, str):
                 return out  # checked: success status, non-empty value
             if out is not None:

@@ -140,8 +140,17 @@ def test_an_empty_value_is_unknown_not_an_empty_text() -> None:
         # L agrees with the bytes sent, V does not (the fast path must check V too)
         bytes.fromhex("0000 000B 00 0003") + b"v:BAD" + bytes.fromhex("0001 01"),
         bytes.fromhex("0000 000B 00 0004") + b"v:BAD" + bytes.fromhex("0001 01"),
+        # V agrees with the bytes sent, L does not (the fast path must check L too)
+        bytes.fromhex("0000 000A 00 0005") + b"v:BAD" + bytes.fromhex("0001 01"),
+        bytes.fromhex("0000 000C 00 0005") + b"v:BAD" + bytes.fromhex("0001 01"),
+        bytes.fromhex("0000 0013 00 0005") + b"v:BAD" + bytes.fromhex("0001 01"),
+        # L agrees, V counts the whole frame plus its head
+        bytes.fromhex("0000 000B 00 0019") + b"v:BAD" + bytes.fromhex("0001 01"),
     ],
-    ids=["cut", "value-length-over", "value-length-under", "write-mode", "v-3", "v-4"],
+    ids=[
+        *("cut", "value-length-over", "value-length-under", "write-mode", "v-3", "v-4"),
+        *("l-1", "l+1", "l+8", "v+20"),
+    ],
 )
 def test_a_malformed_or_mismatched_reply_is_never_a_value(frame: bytes) -> None:
     with (
@@ -229,3 +238,18 @@ def test_a_pipelined_read_without_a_reply_times_out_alone_and_its_late_reply_is_
         assert kvp.read("NEXT", timeout=2.0) == "v:NEXT"  # not LATE's reply
         assert kvp.connected
         assert kvp.connection is not None and kvp.connection.in_flight == 0
+
+
+@pytest.mark.parametrize("msg_id", [0x0101, 0x0201, 0x0102])
+@pytest.mark.parametrize("status", [0, 2])
+def test_only_status_1_is_success_whatever_the_id(msg_id: int, status: int) -> None:
+    """The fast path reads the status from the last byte, never from another byte that
+    happens to be 1 (an id's low byte), and takes no other status than 1 for success."""
+    replies = {"F": _reply(b"v:F", status=status)}
+    with FakeProxy(_serve(replies)) as port, sync.Client(port=port, timeout=1.0) as kvp:
+        assert kvp.read("OK") == "v:OK"
+        assert kvp.connection is not None
+        kvp.connection.session.next_id = msg_id
+        with pytest.raises(ReadFailedError):
+            kvp.read("F")
+        assert kvp.read("OK") == "v:OK" and kvp.connected
