@@ -59,6 +59,10 @@ def test_cartesian_presses_set_the_path_or_the_orientation_acceleration() -> Non
     # Y and A: the speed of their kind (path, orientation)
     assert plan_jog(JogRequest("base", "Z", 1, None, 50.0), KR6R900SIXX).speed == 50.0
     assert plan_jog(JogRequest("base", "A", 1, None, 50.0), KR6R900SIXX).speed == 15.0
+    # A, the first rotation: 15 deg/s / 0.02 s = 750 deg/s² of orientation acceleration, the
+    # path acceleration left at its default (the boundary between path and orientation keys)
+    assert plan_jog(JogRequest("base", "A", 1, None, 50.0), KR6R900SIXX).acc == (100, 1.0, 750.0)
+    assert plan_jog(JogRequest("base", "Z", 1, None, 50.0), KR6R900SIXX).acc == (100, 2.5, 100.0)
 
 
 def test_axis_accelerations_are_a_percentage_from_1_to_100() -> None:
