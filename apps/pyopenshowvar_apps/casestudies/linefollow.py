@@ -27,7 +27,7 @@ import asyncio
 import contextlib
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import AsyncIterator, Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -246,13 +246,8 @@ async def run_line_following(
     xyz, poses = _poses(detected, length, resolution_mm, lift_mm, model)
 
     vel = speed if speed is not None else length / duration_s / 1000.0
-    old = await client.read_many(["$VEL.CP", "$ACC.CP", "$APO.CDIS"])
-    await client.write("$VEL.CP", round(vel, 6))
-    if acc is not None:
-        await client.write("$ACC.CP", acc)
-    await client.write("$APO.CDIS", cdis_mm)
     expected = (length + 2 * lift_mm + 400.0) / (vel * 1000.0) / time_scale
-    try:
+    async with _path_settings(client, vel, acc, cdis_mm):
         await client.write("$VEL.CP", approach_speed)
         await _execute(client, poses[:1], timeout=10 + 2.0 / approach_speed, poll=0.0, truth=None)
         await client.write("$VEL.CP", round(vel, 6))
@@ -264,10 +259,6 @@ async def run_line_following(
             truth=truth,
             truth_period=max(0.006 / time_scale, 0.002),
         )
-    finally:
-        for name, r in old.items():
-            if r.text is not None:
-                await client.write(name, r.text)
 
     data = physical if truth is not None else reported
     t, measured = data[:, 0] * time_scale, data[:, 1:4]
@@ -283,6 +274,25 @@ async def run_line_following(
     if plots:
         figures(result, out, det, detected, reference, t, measured, on, err_xy, err_z)
     return result
+
+
+@contextlib.asynccontextmanager
+async def _path_settings(
+    client: Client, vel: float, acc: float | None, cdis_mm: float
+) -> AsyncIterator[None]:
+    """``$VEL.CP`` (m/s), ``$ACC.CP`` (if given) and ``$APO.CDIS`` set for the path, and
+    what they were written back after it, whatever happened."""
+    old = await client.read_many(["$VEL.CP", "$ACC.CP", "$APO.CDIS"])
+    await client.write("$VEL.CP", round(vel, 6))
+    if acc is not None:
+        await client.write("$ACC.CP", acc)
+    await client.write("$APO.CDIS", cdis_mm)
+    try:
+        yield
+    finally:
+        for name, r in old.items():
+            if r.text is not None:
+                await client.write(name, r.text)
 
 
 def _poses(

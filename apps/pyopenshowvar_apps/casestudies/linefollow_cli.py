@@ -88,17 +88,9 @@ def linefollow(
 
     from rich.console import Console
 
-    from pyopenshowvar import Client
     from pyopenshowvar_apps.casestudies.common import output_dir, summary_table
-    from pyopenshowvar_apps.casestudies.linefollow import run_line_following
     from pyopenshowvar_apps.casestudies.lineimage import generate_line_image
     from pyopenshowvar_apps.common import Opts, fail_for
-
-    def pixel(text: str | None) -> tuple[int, int] | None:
-        if text is None:
-            return None
-        x, y = (int(v) for v in text.split(","))
-        return (x, y)
 
     folder = output_dir(out)
     truth = None
@@ -113,26 +105,14 @@ def linefollow(
         emu, tcp = _emulator(image, scale, pose, speed, calibration_error)
         host, port, scale_t = "127.0.0.1", emu.port, speed
 
-    async def job() -> Any:
-        async with Client(host, port, timeout=Opts.timeout) as client:
-            return await run_line_following(
-                client,
-                image,
-                start=pixel(start),
-                end=pixel(end),
-                resolution_mm=resolution,
-                scale_mm_per_px=scale,
-                table_pose=pose,
-                duration_s=duration,
-                cdis_mm=cdis,
-                time_scale=scale_t,
-                ground_truth=truth,
-                truth=tcp,
-                out_dir=folder,
-            )
+    options = dict(
+        start=_pixel(start), end=_pixel(end), resolution_mm=resolution, scale_mm_per_px=scale,
+        table_pose=pose, duration_s=duration, cdis_mm=cdis, time_scale=scale_t,
+        ground_truth=truth, truth=tcp, out_dir=folder,
+    )  # fmt: skip
 
     try:
-        result = asyncio.run(job())
+        result = asyncio.run(_follow(host, port, image, options))
     except (OSError, TimeoutError, RuntimeError, ValueError) as exc:
         fail_for(exc)
     finally:
@@ -168,3 +148,20 @@ def _emulator(
         return plant.truth.tcp[:3, 3]
 
     return emu, tcp
+
+
+async def _follow(host: str, port: int, image: Path, options: dict[str, Any]) -> Any:
+    from pyopenshowvar import Client
+    from pyopenshowvar_apps.casestudies.linefollow import run_line_following
+    from pyopenshowvar_apps.common import Opts
+
+    async with Client(host, port, timeout=Opts.timeout) as client:
+        return await run_line_following(client, image, **options)
+
+
+def _pixel(text: str | None) -> tuple[int, int] | None:
+    """An 'x,y' option (already checked by its callback) as a pixel."""
+    if text is None:
+        return None
+    x, y = (int(v) for v in text.split(","))
+    return (x, y)
