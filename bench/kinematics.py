@@ -90,49 +90,11 @@ def run(quick: bool, repeat: int, batch: int, seconds: float) -> tuple[list[Row]
     peer_single: dict[str, Callable[[], object]] = {}
     peer_batched: dict[str, tuple[Callable[[], object], int]] = {}
     if robot is not None:
-        from spatialmath import SE3
-
         qr = np.radians(qs)
         q1r = qr[0]
-        # --- agreement on the benchmark's poses
-        T_peer = robot.fkine(qr)  # SE3 with `batch` values
-        A = np.asarray(T_peer.A)
-        pos_err = float(np.max(np.abs(A[:, :3, 3] * 1000.0 - mats[:, :3, 3])))
-        rot_err = float(np.max(np.abs(A[:, :3, :3] - mats[:, :3, :3])))
-        n_j = min(batch, 500)
-        J_ours = jacobian(M, qs[:n_j])
-        J_peer = np.stack([robot.jacob0(q) for q in qr[:n_j]])
-        J_peer[:, :3, :] *= 1000.0  # m/rad -> mm/rad
-        jac_err = float(np.max(np.abs(J_ours - J_peer)))
-        # IK: each solution's FK must reproduce the target (branches may differ)
+        agreement, targets = _agreement(robot, qs, poses, s, t, mats)
+        extra["agreement"] = agreement
         n_ik = min(batch, 200)
-        ours_ik = inverse(M, poses[:n_ik], s=s[:n_ik], t=t[:n_ik])
-        ours_ik_err = float(np.max(np.abs(fk_matrix(M, ours_ik)[:, :3, 3] - mats[:n_ik, :3, 3])))
-        targets = [SE3(m[:3, 3] / 1000.0) * SE3.Rt(m[:3, :3]) for m in mats[:n_ik]]
-        sols = [robot.ikine_LM(T, q0=np.radians(M.home), tol=IK_TOL) for T in targets]
-        ok = [sol.success for sol in sols]
-        peer_pos = np.stack([robot.fkine(sol.q).A for sol in sols])
-        peer_ik_err = float(
-            np.max(np.abs(peer_pos[ok][:, :3, 3] * 1000.0 - mats[:n_ik][ok][:, :3, 3]))
-        )
-        peer_ik_rot = float(np.max(np.abs(peer_pos[ok][:, :3, :3] - mats[:n_ik][ok][:, :3, :3])))
-        ours_ik_rot = float(np.max(np.abs(fk_matrix(M, ours_ik)[:, :3, :3] - mats[:n_ik, :3, :3])))
-        extra["agreement"] = {
-            "fk_position_max_diff_mm": pos_err,
-            "fk_rotation_max_diff": rot_err,
-            "jacobian_max_diff_mm_per_rad": jac_err,
-            "ik_ours_max_position_error_mm": ours_ik_err,
-            "ik_ours_max_rotation_error": ours_ik_rot,
-            "ik_peer_max_position_error_mm": peer_ik_err,
-            "ik_peer_max_rotation_error": peer_ik_rot,
-            "ik_peer_success": f"{sum(ok)}/{n_ik}",
-            "ik_peer_same_branch": int(
-                sum(
-                    np.allclose(np.degrees(sol.q), q, atol=1e-3)
-                    for sol, q in zip(sols, qs[:n_ik], strict=True)
-                )
-            ),
-        }
         T1 = targets[0]
         q0 = np.radians(M.home)
         peer_single = {
@@ -161,6 +123,23 @@ def run(quick: bool, repeat: int, batch: int, seconds: float) -> tuple[list[Row]
         "ik": lambda: inverse(M, poses, s=s, t=t),
         "jac": lambda: jacobian(M, qs),
     }
+    rows = _rows(
+        ours_single, ours_batched, peer_single, peer_batched, repeat, batch, seconds, robot
+    )
+    return rows, extra
+
+
+def _rows(
+    ours_single: dict[str, Callable[[], object]],
+    ours_batched: dict[str, Callable[[], object]],
+    peer_single: dict[str, Callable[[], object]],
+    peer_batched: dict[str, tuple[Callable[[], object], int]],
+    repeat: int,
+    batch: int,
+    seconds: float,
+    robot: Any,
+) -> list[Row]:
+    """Poses per second of each operation, one pose per call and batched, ours and the peer's."""
     labels = {"fk": "FK (4×4 pose)", "ik": "IK (closed form, given S/T)", "jac": "Jacobian (6×6)"}
     rows: list[Row] = []
     for key in ("fk", "ik", "jac"):
@@ -190,7 +169,56 @@ def run(quick: bool, repeat: int, batch: int, seconds: float) -> tuple[list[Row]
                     else "roboticstoolbox-python not installed: peer skipped",
                 )
             )
-    return rows, extra
+    return rows
+
+
+def _agreement(
+    robot: Any, qs: np.ndarray, poses: np.ndarray, s: Any, t: Any, mats: np.ndarray
+) -> tuple[dict[str, Any], list[Any]]:
+    """How far ours and the peer agree on the benchmark's poses (FK, Jacobian, IK: each
+    solution's FK must reproduce the target, branches may differ), and the peer's IK targets."""
+    from spatialmath import SE3
+
+    batch = len(qs)
+    qr = np.radians(qs)
+    # --- agreement on the benchmark's poses
+    T_peer = robot.fkine(qr)  # SE3 with `batch` values
+    A = np.asarray(T_peer.A)
+    pos_err = float(np.max(np.abs(A[:, :3, 3] * 1000.0 - mats[:, :3, 3])))
+    rot_err = float(np.max(np.abs(A[:, :3, :3] - mats[:, :3, :3])))
+    n_j = min(batch, 500)
+    J_ours = jacobian(M, qs[:n_j])
+    J_peer = np.stack([robot.jacob0(q) for q in qr[:n_j]])
+    J_peer[:, :3, :] *= 1000.0  # m/rad -> mm/rad
+    jac_err = float(np.max(np.abs(J_ours - J_peer)))
+    # IK: each solution's FK must reproduce the target (branches may differ)
+    n_ik = min(batch, 200)
+    ours_ik = inverse(M, poses[:n_ik], s=s[:n_ik], t=t[:n_ik])
+    ours_ik_err = float(np.max(np.abs(fk_matrix(M, ours_ik)[:, :3, 3] - mats[:n_ik, :3, 3])))
+    targets = [SE3(m[:3, 3] / 1000.0) * SE3.Rt(m[:3, :3]) for m in mats[:n_ik]]
+    sols = [robot.ikine_LM(T, q0=np.radians(M.home), tol=IK_TOL) for T in targets]
+    ok = [sol.success for sol in sols]
+    peer_pos = np.stack([robot.fkine(sol.q).A for sol in sols])
+    peer_ik_err = float(np.max(np.abs(peer_pos[ok][:, :3, 3] * 1000.0 - mats[:n_ik][ok][:, :3, 3])))
+    peer_ik_rot = float(np.max(np.abs(peer_pos[ok][:, :3, :3] - mats[:n_ik][ok][:, :3, :3])))
+    ours_ik_rot = float(np.max(np.abs(fk_matrix(M, ours_ik)[:, :3, :3] - mats[:n_ik, :3, :3])))
+    agreement = {
+        "fk_position_max_diff_mm": pos_err,
+        "fk_rotation_max_diff": rot_err,
+        "jacobian_max_diff_mm_per_rad": jac_err,
+        "ik_ours_max_position_error_mm": ours_ik_err,
+        "ik_ours_max_rotation_error": ours_ik_rot,
+        "ik_peer_max_position_error_mm": peer_ik_err,
+        "ik_peer_max_rotation_error": peer_ik_rot,
+        "ik_peer_success": f"{sum(ok)}/{n_ik}",
+        "ik_peer_same_branch": int(
+            sum(
+                np.allclose(np.degrees(sol.q), q, atol=1e-3)
+                for sol, q in zip(sols, qs[:n_ik], strict=True)
+            )
+        ),
+    }
+    return agreement, targets
 
 
 def rtb_version() -> str:

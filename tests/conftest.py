@@ -21,6 +21,7 @@ import logging
 from collections.abc import Generator, Iterator
 
 import pytest
+import slow_first
 
 pytest_plugins = ["kukavarproxy_emu.testing", "pytester"]
 
@@ -60,6 +61,11 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line(
         "markers", "asyncio_errors_expected: the test provokes unhandled asyncio errors on purpose"
     )
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    # the longest tests first: see slow_first.py
+    slow_first.order(items, slow_first.load())
 
 
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:

@@ -26,6 +26,26 @@ from textual import events
 from textual.widgets import DataTable, Input, TabbedContent
 
 
+async def _settled(min_sleep: float = 0.0, max_sleep: float = 1.0) -> None:
+    """Two short sleeps: time for the keys' messages to be handled, without Textual's guess."""
+    await asyncio.sleep(0.01)
+    await asyncio.sleep(0)
+
+
+@pytest.fixture(autouse=True)
+def no_idle_guess(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Key presses without Textual's wait for an idle process (shared with test_monitor_layout).
+
+    After each key the pilot waits until the process' CPU time stops advancing, up to 1 s. The
+    emulator these tests talk to runs in the same process, ticking its robot and plant, so the
+    process is never idle: every key cost a second and the file ran for a minute and a half.
+    Each test waits for what it needs instead (``until``), so only that guess is replaced.
+    """
+    import textual.app
+
+    monkeypatch.setattr(textual.app, "wait_for_idle", _settled)
+
+
 async def until(pilot: Any, cond: Callable[[], bool], timeout: float = 8.0) -> None:
     """Wait until ``cond()`` holds, letting the app run (shared with test_monitor_layout)."""
     loop = asyncio.get_running_loop()

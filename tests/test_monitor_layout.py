@@ -15,7 +15,7 @@ from pyopenshowvar_apps.monitor.app import MonitorApp
 from pyopenshowvar_apps.monitor.dialogs import InputDialog
 from pyopenshowvar_apps.monitor.watchlist import WatchList
 from rich.console import Console
-from test_monitor import until
+from test_monitor import no_idle_guess, until  # noqa: F401 (no_idle_guess: autouse fixture)
 from textual.widgets import DataTable, Input, TabbedContent
 
 WATCH = ["MYAXIS", "$OV_PRO", "$POS_ACT", "MYINT"]

@@ -7,6 +7,8 @@ neither knows nor cares how the program is written. A LIN can also be planned in
 within its per-cycle time budget, so a long line never holds the event loop. Each :meth:`~MotionKernel.tick` advances
 the running segments by one IPO cycle and writes every motion variable of the store in one
 synchronous step, so a KVP read served by the same asyncio loop always sees one cycle.
+LIN planning lives in :mod:`.lin_plan`, the settings read from the store in :mod:`.settings`,
+the published variables in :mod:`.publish`: three halves mixed into one kernel that owns the state.
 
 Model (see docs/emulator-robot.md):
 
@@ -24,11 +26,8 @@ Model (see docs/emulator-robot.md):
 from __future__ import annotations
 
 import logging
-import math
-import time
 from collections import deque
 from collections.abc import Callable, Generator, Sequence
-from typing import TypeVar, cast
 
 import numpy as np
 
@@ -37,20 +36,16 @@ from pyopenshowvar.kinematics import (
     RobotModel,
     UnreachableError,
     fk_matrix,
-    forward,
     inverse,
-    matrix_to_frame,
-    pose_to_matrix,
 )
-from pyopenshowvar.krl import Struct
 
 from ..store import VariableStore
 from .dynamics import ControllerDynamics, MachineData
-from .path import LinGeometry, PathLimits, PathRefused, joint_path, leave_wrist_singularity
+from .lin_plan import LinPlanner, PlanJob, lin_pose, next_result
 from .profiles import FloatArray, Profile
 from .publish import Publisher
-from .retime import blend_ratio, check_accelerations
-from .segments import ConstLimits, Kind, Segment, blend, rotation_log, rotvec_matrix
+from .segments import ConstLimits, Kind, Segment, blend
+from .settings import MotionRefused, axes_of, xyzabc
 
 __all__ = ["DEFAULT_INERTIA", "MotionKernel", "MotionRefused", "PlanJob"]
 
@@ -62,84 +57,12 @@ log = logging.getLogger(__name__)
 DEFAULT_INERTIA = (2.0, 2.5, 0.7, 0.04, 0.04, 0.01)
 #: Bisection steps for the override rate of one cycle (resolution 2⁻¹² of the change).
 OV_BISECT = 12
-#: |A5| below this (deg) is on the wrist singularity, where a LIN first turns A4/A6 in place.
-WRIST_SINGULAR = 1e-6
 #: KRC machine datum $APO_DIS_PTP (deg): 100 % C_PTP would start blending this far out.
 APO_DIS_PTP = 90.0
-#: Tries to blend two LINs within the axis accelerations before they stop exactly instead.
-BLEND_TRIES = 4
 TraceSample = tuple[float, FloatArray, FloatArray]
-T = TypeVar("T")
 
 
-class MotionRefused(Exception):
-    """A motion the controller refuses (software limit, unreachable pose); text = message."""
-
-
-class PlanJob:
-    """A motion being planned in slices: :meth:`step` until it returns True.
-
-    Each :meth:`step` does at least one slice (an IK batch, a few hundred nodes of a pass) and
-    stops at ``deadline`` (``time.perf_counter()``); the motion is queued by the last slice.
-    A refused motion raises :class:`MotionRefused` from :meth:`step`.
-    """
-
-    def __init__(self, work: Generator[None, None, None]) -> None:
-        self._work = work
-        self.done = False
-        self.slices = 0
-
-    def step(self, deadline: float) -> bool:
-        while not self.done:
-            self.slices += 1
-            try:
-                next(self._work)
-            except StopIteration:
-                self.done = True
-            if time.perf_counter() >= deadline:
-                break
-        return self.done
-
-    def run(self) -> None:
-        """Plan to the end at once (in-process callers and tests)."""
-        self.step(math.inf)
-
-
-def next_result(gen: Generator[None, None, T]) -> T:
-    """Run a planning generator to its end at once and return its result."""
-    while True:
-        try:
-            next(gen)
-        except StopIteration as stop:
-            return stop.value  # type: ignore[no-any-return]
-
-
-def _xyzabc(value: object, what: str) -> FloatArray:
-    if isinstance(value, Struct):
-        try:
-            return np.array([float(value[k]) for k in ("X", "Y", "Z", "A", "B", "C")])  # type: ignore[arg-type]
-        except (KeyError, TypeError):
-            raise MotionRefused(f"{what} is not a complete X, Y, Z, A, B, C value") from None
-    arr = np.asarray(value, dtype=np.float64)
-    if arr.shape != (6,):
-        raise MotionRefused(f"{what} needs 6 values")
-    return arr
-
-
-def axes_of(value: object, what: str = "target") -> FloatArray:
-    """A1..A6 of an AXIS/E6AXIS struct (all six must be set) or a 6-sequence, as floats."""
-    if isinstance(value, Struct):
-        try:
-            return np.array([float(value[f"A{i}"]) for i in range(1, 7)])  # type: ignore[arg-type]
-        except (KeyError, TypeError):
-            raise MotionRefused(f"{what} is not a complete axis value (A1..A6)") from None
-    arr = np.asarray(value, dtype=np.float64)
-    if arr.shape != (6,) or not np.all(np.isfinite(arr)):
-        raise MotionRefused(f"{what} needs 6 finite axis values")
-    return arr
-
-
-class MotionKernel(Publisher):
+class MotionKernel(LinPlanner, Publisher):
     """Owns the joint state and the queue of planned motions of one simulated robot."""
 
     def __init__(
@@ -220,64 +143,6 @@ class MotionKernel(Publisher):
         return ahead < max(advance, 0)
 
     # --- planning (called by programs) -----------------------------------------------------
-    def _cached(self, names: tuple[str, str], build: Callable[[], T]) -> T:
-        """``build()`` of the variables ``names``, built again only when one of them changed
-        (a follower plans a motion every cycle; these arrays change once in a while)."""
-        key = (names, self.store.version(names[0]), self.store.version(names[1]))
-        hit = self._cache.get(names)
-        if hit is not None and hit[0] == key:
-            return cast("T", hit[1])
-        value = build()
-        for arr in value if isinstance(value, tuple) else ():
-            if isinstance(arr, np.ndarray):
-                arr.setflags(write=False)  # shared between plans: nobody may change it
-        self._cache[names] = (key, value)
-        return value
-
-    def _limits(self) -> tuple[FloatArray, FloatArray]:
-        return self._cached(("$VEL_AXIS", "$ACC_AXIS"), self._read_limits)
-
-    def _read_limits(self) -> tuple[FloatArray, FloatArray]:
-        vel = self._percent("$VEL_AXIS")
-        acc = self._percent("$ACC_AXIS")
-        return self.model.max_speed * vel, self.model.max_accel * acc
-
-    def _percent(self, name: str) -> FloatArray:
-        values = self.store.get(name)
-        assert isinstance(values, list)
-        # 0 % would mean "never arrive": a KRC refuses it, we treat it as 1 %.
-        return np.array([max(float(v), 1.0) for v in values[:6]]) / 100.0  # type: ignore[arg-type]
-
-    def _soft_limits(self) -> tuple[FloatArray, FloatArray]:
-        return self._cached(("$SOFTN_END", "$SOFTP_END"), self._read_soft_limits)
-
-    def _read_soft_limits(self) -> tuple[FloatArray, FloatArray]:
-        lo, hi = self.store.get("$SOFTN_END"), self.store.get("$SOFTP_END")
-        assert isinstance(lo, list) and isinstance(hi, list)
-        return np.array(lo[:6], dtype=np.float64), np.array(hi[:6], dtype=np.float64)
-
-    def check_limits(self, q: FloatArray, what: str) -> None:
-        """Raise :class:`MotionRefused` like a KRC when ``q`` is outside the software limits."""
-        lo, hi = self._soft_limits()
-        for i in range(6):
-            if q[i] > hi[i] + 1e-9:
-                raise MotionRefused(
-                    f"Software limit switch +A{i + 1}: {what} A{i + 1} {q[i]:g} > {hi[i]:g}"
-                )
-            if q[i] < lo[i] - 1e-9:
-                raise MotionRefused(
-                    f"Software limit switch -A{i + 1}: {what} A{i + 1} {q[i]:g} < {lo[i]:g}"
-                )
-
-    def _apo(self) -> Struct:
-        apo = self.store.get("$APO")
-        assert isinstance(apo, Struct)
-        return apo
-
-    def _read_frames(self) -> tuple[FloatArray, FloatArray]:
-        tool, base = self.store.get("$TOOL"), self.store.get("$BASE")
-        return _xyzabc(tool, "$TOOL"), _xyzabc(base, "$BASE")
-
     def ptp(self, target: object, *, approx: bool = False, label: str = "PTP") -> None:
         """Plan ``PTP target [C_PTP]`` to an axis value (struct or 6 numbers, deg)."""
         q1 = axes_of(target, label)
@@ -317,7 +182,7 @@ class MotionKernel(Publisher):
         try:
             q1 = inverse(
                 self.model,
-                _xyzabc(pose, label),
+                xyzabc(pose, label),
                 s=s,
                 t=t,
                 current=self.planned_q,
@@ -328,127 +193,14 @@ class MotionKernel(Publisher):
             raise MotionRefused(f"{label}: target not reachable: {exc}") from None
         self.ptp(q1, approx=approx, label=label)
 
-    def planned_pose(self) -> FloatArray:
-        """The TCP pose (XYZABC in $BASE) at the end of the last planned motion."""
-        tool, base = self._read_frames()
-        return np.asarray(forward(self.model, self.planned_q, tool, base), dtype=np.float64)
-
-    def rel_pose(self, increment: object, *, tool: bool = False) -> FloatArray:
-        """Planned end pose moved by a Cartesian increment: X/Y/Z added in $BASE, and the
-        rotation Rz(A)·Ry(B)·Rx(C) applied about the $BASE axes at the TCP; with ``tool``
-        (``#TOOL``) the increment is a frame in the TCP's own axes instead."""
-        inc = _xyzabc(increment, "increment")
-        start = pose_to_matrix(self.planned_pose())
-        if tool:
-            return np.asarray(matrix_to_frame(start @ pose_to_matrix(inc)), dtype=np.float64)
-        rot = pose_to_matrix(np.array([0.0, 0.0, 0.0, *inc[3:]]))
-        end = start.copy()
-        end[:3, :3] = rot[:3, :3] @ start[:3, :3]
-        end[:3, 3] += inc[:3]
-        return np.asarray(matrix_to_frame(end), dtype=np.float64)
-
     def ptp_rel_pose(
         self, increment: object, *, approx: bool = False, tool: bool = False, label: str = "PTP_REL"
     ) -> None:
         """``PTP_REL`` by a POS/FRAME increment (Algorithm 4.12's ``PTP_REL MYPOS``)."""
-        inc = _xyzabc(increment, label)
+        inc = xyzabc(increment, label)
         if not self.active and not self.pending and not np.any(inc):
             return
         self.ptp_pose(self.rel_pose(inc, tool=tool), approx=approx, label=label)
-
-    def lin(self, pose: object, *, approx: bool = False, label: str = "LIN") -> None:
-        """Plan ``LIN pose [C_DIS]``: a straight TCP line in $BASE at ``$VEL.CP``."""
-        self.plan_lin(pose, approx=approx, label=label).run()
-
-    def plan_lin(self, pose: object, *, approx: bool = False, label: str = "LIN") -> PlanJob:
-        """``LIN pose`` as a :class:`PlanJob`: the target and $TOOL/$BASE/$VEL/$ACC/$APO are
-        read now; the joint path and its timing are computed by the job's slices."""
-        tool, base = frames = self._read_frames()
-        start = fk_matrix(self.model, self.planned_q, tool, base)
-        end = pose_to_matrix(_xyzabc(pose, label))
-        geo = LinGeometry(
-            start, end[:3, 3] - start[:3, 3], rotation_log(end[:3, :3] @ start[:3, :3].T)
-        )
-        vel, acc = self.store.get("$VEL"), self.store.get("$ACC")
-        assert isinstance(vel, Struct) and isinstance(acc, Struct)
-        v = (float(vel["CP"]) * 1000.0, float(vel["ORI1"]))  # type: ignore[arg-type]
-        a = (float(acc["CP"]) * 1000.0, float(acc["ORI1"]))  # type: ignore[arg-type]
-        cdis = float(self._apo()["CDIS"])  # type: ignore[arg-type]
-        frac = min(0.5, cdis / geo.length) if geo.length > 0 else 0.0
-        return PlanJob(self._plan_lin(geo, frames, v, a, approx, frac, label))
-
-    def plan_lin_rel(
-        self, increment: object, *, approx: bool = False, tool: bool = False, label: str = "LIN_REL"
-    ) -> PlanJob:
-        return self.plan_lin(self.rel_pose(increment, tool=tool), approx=approx, label=label)
-
-    def _plan_lin(
-        self,
-        geo: LinGeometry,
-        frames: tuple[FloatArray, FloatArray],
-        v: tuple[float, float],
-        a: tuple[float, float],
-        approx: bool,
-        frac: float,
-        label: str,
-    ) -> Generator[None, None, None]:
-        q0 = self.planned_q.copy()
-        if not self.active and not self.pending and geo.length < 1e-9 and geo.angle < 1e-9:
-            return
-        try:
-            config = None
-            start = q0
-            if abs(q0[4]) < WRIST_SINGULAR:
-                start, config = leave_wrist_singularity(self.model, geo, q0, *frames)
-            s, q = yield from joint_path(self.model, geo, start, *frames, config=config)
-            lo, hi = self._soft_limits()
-            outside = np.flatnonzero(np.any((q < lo[:6] - 1e-9) | (q > hi[:6] + 1e-9), axis=1))
-            if len(outside):
-                self.check_limits(q[outside[0]], f"{label} at {s[outside[0]]:.0%}")
-            limits = PathLimits(
-                self.model, s, q, geo, v, a, self.model.max_speed, self.model.max_accel
-            )
-            if self.dynamics is not None:
-                yield  # the limits above were one slice; the motors' rows are more
-                self.dynamics.use_load(self.store.get("$LOAD"))
-                limits.constrain(*(yield from self.dynamics.path_rows(q, limits.qp, limits.qpp)))
-                yield
-            curve, bw = yield from limits.plan()
-            lin_tool, lin_base = frames
-
-            def solve(s_at: FloatArray, near: FloatArray) -> FloatArray:
-                poses = geo.poses(s_at)
-                return inverse(
-                    self.model, poses, current=near, tool=lin_tool, base=lin_base, errors="nan"
-                )
-
-            curve, bw = yield from check_accelerations(limits, curve, bw, solve, self.ipo)
-            profile = Profile(*curve)
-        except PathRefused as exc:
-            raise MotionRefused(f"{label}: {exc}") from None
-        except ValueError as exc:  # a profile that stalls: too close to a singularity
-            raise MotionRefused(f"{label}: {exc}") from None
-        if not np.array_equal(q0, self.planned_q):
-            raise MotionRefused(f"{label}: the motions before it changed while it was planned")
-        if np.max(np.abs(start - q0)) > 1e-9:
-            # starting on the wrist singularity: A4/A6 first turn in place (the TCP stays put)
-            self.ptp(start, label=f"{label} (wrist)")
-        rows = [(geo.dp, a[0]), (np.degrees(geo.rv), a[1])]
-        seg = Segment(
-            Kind.LIN, profile, limits, bw, geo.dp, q[-1].copy(), approx, frac, geo.rv, label, rows
-        )
-        self._frames = frames
-        yield from self._enqueue(seg)
-
-    @staticmethod
-    def _lin_pose(
-        base: FloatArray, parts: list[tuple[FloatArray, FloatArray, float]]
-    ) -> FloatArray:
-        pose = base.copy()
-        for dp, rv, s in parts:
-            pose[:3, 3] += dp * s
-            pose[:3, :3] = rotvec_matrix(rv * s) @ pose[:3, :3]
-        return pose
 
     def _enqueue(self, seg: Segment) -> Generator[None, None, None]:
         """Queue ``seg``, approximating the motion before it if that one allows it."""
@@ -466,34 +218,6 @@ class MotionKernel(Publisher):
                 yield from blend(before, seg, progress)
         self.pending.append(seg)
         self.planned_q = seg.end_q.copy()
-
-    def _blend_lin(
-        self, cur: Segment, nxt: Segment, progress: Callable[[], float]
-    ) -> Generator[None, None, None]:
-        """Blend two LINs so that the axes keep their accelerations in the window, where
-        they follow neither line (:func:`.retime.blend_ratio`): a window too fast is undone at
-        once (no cycle ran since it was made) and made again slower; at worst no blend."""
-        saved = (cur.profile, cur.blend_at, nxt.profile, nxt.head_end)
-        end = fk_matrix(self.model, cur.end_q, *self._frames)
-        base = end.copy()
-        base[:3, 3] -= cur.delta
-        base[:3, :3] = rotvec_matrix(cur.rotvec).T @ end[:3, :3]
-        tool, frame = self._frames
-
-        def solve(poses: FloatArray, near: FloatArray) -> FloatArray:
-            return np.asarray(
-                inverse(self.model, poses, current=near, tool=tool, base=frame, errors="nan")
-            )
-
-        slower = 1.0
-        for _ in range(BLEND_TRIES):
-            if not (yield from blend(cur, nxt, progress, slower)):
-                return
-            ratio = blend_ratio(cur, nxt, base, solve, self.ipo)
-            if ratio <= 1.0 + 1e-9:
-                return
-            cur.profile, cur.blend_at, nxt.profile, nxt.head_end = saved
-            slower *= 0.97 / ratio
 
     def stop(self, *, hard: bool = False) -> None:
         """Forget the planned motions; the running ones end exactly (``hard``: at once)."""
@@ -627,7 +351,7 @@ class MotionKernel(Publisher):
                 if seg.kind is Kind.PTP:
                     self._q_base = self._q_base + seg.delta
                 else:
-                    self._lin_base = self._lin_pose(self._lin_base, [(seg.delta, seg.rotvec, 1.0)])
+                    self._lin_base = lin_pose(self._lin_base, [(seg.delta, seg.rotvec, 1.0)])
                     self._q_base = seg.end_q.copy()
             if not self.active and not finished:
                 carry = 0.0
@@ -645,7 +369,7 @@ class MotionKernel(Publisher):
                 q += seg.delta * seg.profile.s_at(seg.t)
             return q
         parts = [(seg.delta, seg.rotvec, seg.profile.s_at(seg.t)) for seg in self.active]
-        pose = self._lin_pose(self._lin_base, parts)
+        pose = lin_pose(self._lin_base, parts)
         try:
             q = inverse(
                 self.model, pose, current=self.q, tool=self._frames[0], base=self._frames[1]

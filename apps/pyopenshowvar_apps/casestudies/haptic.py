@@ -20,15 +20,15 @@ should be gentle.
 an object in the simulation (``emu.robot.plant.truth.contact``) and ``EMU_WRENCH`` (a virtual
 wall or payload the test harness applies). ``truth`` returns the true TCP force; without it on
 a real robot the errors are NaN. Settled samples (the app's rest average) and moving samples
-(fresh per-cycle estimates) are scored separately (:mod:`.haptic_report`).
+(fresh per-cycle estimates) are scored separately (:mod:`.haptic_report`). The handle, the
+operator's hand and the forces the app sets up itself are in :mod:`.haptic_world`.
 """
 
 from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Awaitable, Callable
-from dataclasses import dataclass
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Literal
 
@@ -48,6 +48,14 @@ from pyopenshowvar_apps.casestudies.haptic_model import (
     tare,
 )
 from pyopenshowvar_apps.casestudies.haptic_report import report
+from pyopenshowvar_apps.casestudies.haptic_world import (
+    Environment,
+    HapticDevice,
+    Truth,
+    Wall,
+    World,
+    operator_script,
+)
 
 __all__ = [
     "HapticDevice",
@@ -63,66 +71,6 @@ log = logging.getLogger(__name__)
 MODEL = KR6R900SIXX
 #: Fewest cycles of free motion the friction identification is run on.
 MIN_IDENT_CYCLES = 20
-G = 9.81
-Environment = Callable[[FloatArray], Awaitable[None] | None]
-Truth = Callable[[], npt.ArrayLike]
-
-
-@dataclass(frozen=True)
-class Wall:
-    """A plane ``position`` mm along base ``axis`` that the TCP may cross going ``direction``
-    (+1: towards +axis); beyond it a spring of ``stiffness`` N/mm pushes back."""
-
-    axis: int = 0
-    position: float = 555.0
-    stiffness: float = 2.0
-    direction: float = 1.0
-
-    def wrench(self, tcp: npt.ArrayLike) -> FloatArray:
-        """The wrench the TCP exerts on the wall (EMU_WRENCH convention): +k·depth into it."""
-        depth = (float(np.asarray(tcp, float)[self.axis]) - self.position) * self.direction
-        w = np.zeros(6)
-        if depth > 0:
-            w[self.axis] = self.stiffness * depth * self.direction
-        return w
-
-
-class HapticDevice:
-    """A 3-DOF handle (mm, relative to its centre) in a ±``reach`` cube: mass m, the operator's
-    hand a spring-damper towards ``hand`` (N/mm, N·s/mm), plus the rendered force (N)."""
-
-    def __init__(
-        self, *, mass: float = 0.3, k_hand: float = 0.2, b_hand: float = 0.01, reach: float = 80.0
-    ) -> None:
-        self.mass, self.k_hand, self.b_hand, self.reach = mass, k_hand, b_hand, reach
-        self.p = np.zeros(3)
-        self.v = np.zeros(3)  # mm/s
-
-    def step(self, hand: npt.ArrayLike, force: npt.ArrayLike, dt: float) -> FloatArray:
-        """Integrate ``dt`` s (semi-implicit Euler in 4 ms substeps: the hand spring's period is
-        ~0.25 s, so ω·h ≈ 0.1)."""
-        n = max(1, math.ceil(dt / 0.004))
-        h, f, sub = np.asarray(hand, float), np.asarray(force, float), dt / n
-        for _ in range(n):
-            total = self.k_hand * (h - self.p) - self.b_hand * self.v + f  # N
-            self.v = self.v + total / self.mass * 1000.0 * sub  # N/kg = m/s² → mm/s²
-            self.p = np.clip(self.p + self.v * sub, -self.reach, self.reach)
-        return self.p.copy()
-
-
-def operator_script(duration: float) -> Callable[[float], FloatArray]:
-    """Where the operator's hand pulls the handle (mm): like Figure 4.19, lift up first, then
-    sideways and down, then forward — into whatever is in front — hold, and let go."""
-    keys = np.array([0.0, 0.06, 0.16, 0.22, 0.3, 0.36, 0.86, 0.9, 1.0]) * duration
-    pts = np.array(
-        [[0, 0, 0], [0, 0, 40], [0, 0, 40], [0, 30, -15], [0, 30, -15], [50, 0, 0], [50, 0, 0],
-         [0, 0, 0], [0, 0, 0]], dtype=float,
-    )  # fmt: skip
-
-    def at(t: float) -> FloatArray:
-        return np.array([np.interp(t, keys, pts[:, k]) for k in range(3)])
-
-    return at
 
 
 def _mypos(inc: npt.ArrayLike, b: float = 0.0) -> str:
@@ -259,75 +207,34 @@ async def run_haptic(
     limit = MODEL.max_accel * accel_percent / 100.0
     reader = CycleReader(client, clock, model=MODEL, accel_limit=limit)
     old_acc = await client.read("$ACC_AXIS[]")
-    payload = np.array([0, 0, payload_kg * G, 0, 0, 0], float)
-    applied = np.zeros(6)
-
-    async def apply(w: FloatArray) -> None:
-        nonlocal applied
-        applied = w
-        if environment == "kvp":
-            names = ("FX", "FY", "FZ", "MX", "MY", "MZ")
-            text = ", ".join(f"{n} {v:.4f}" for n, v in zip(names, w, strict=True))
-            await client.write("EMU_WRENCH", "{" + text + "}")
-        elif environment is not None:
-            maybe = environment(w)
-            if maybe is not None:
-                await maybe
-
-    def true_force() -> FloatArray:
-        if truth is not None:
-            return np.asarray(truth(), float)[:3]
-        return applied[:3].copy() if environment is not None else np.full(3, math.nan)
-
+    world = World(client, environment, truth, wall, payload_kg)
     rows: list[dict[str, float]] = []
     info: dict[str, float] = {}
     try:
-        if environment is not None:
-            await apply(np.zeros(6))
+        await world.start()
         if tilt:
             await leave_singularity(client, reader, clock)
         for i in range(1, 7):  # gentle from here on: calibration and hand guiding
             await client.write(f"$ACC_AXIS[{i}]", f"{accel_percent:g}")
         terms, info = await calibrate(client, reader, dyn, clock, identify_joints=identify_joints)
         est = ForceEstimator(dyn, terms, tool=tool)
-        rest = RestAverage(est)
-        r0 = await reader.read()
-        x0 = np.asarray(forward(MODEL, r0.q, tool=tool), float)[:3]
-        await apply(_environment(wall, x0) + payload)
-        device, hand_at = HapticDevice(), hand or operator_script(duration)
-        clock_run = Clock(time_scale)
-        rendered, last_inc, moving = np.zeros(3), np.zeros(3), False
-        t_prev = 0.0
-        while (t := clock_run.now()) < duration:
-            r = await reader.read()
-            f_true = true_force()
-            x = np.asarray(forward(MODEL, r.q, tool=tool), float)[:3]
-            f_rest = rest.update(r.q, r.qd, r.tau, r.tau_text, commanding=moving)
-            fresh = None
-            if r.motion is not None:
-                fresh = est.estimate(r.motion, r.tau)
-            if f_rest is not None:  # standing: the running mean since it stopped
-                rendered = f_rest
-            elif fresh is not None:  # a light low-pass (~2 readings) for the hand, not the score
-                rendered = rendered + 0.5 * (fresh - rendered)
-            p = device.step(hand_at(t), -gain * rendered, max(t - t_prev, 0.0))
-            t_prev = t
-            inc = _increment(p, k_inc, dead_zone_mm, moving)
-            if np.any(inc != last_inc):
-                await client.write("MYPOS", _mypos(inc))
-                last_inc = inc
-            moving = bool(np.any(inc != 0))
-            new = _environment(wall, x) + payload
-            if environment is not None and np.max(np.abs(new - applied)) > 0.01:
-                await apply(new)
-            rows.append(
-                _row(t, x - x0, r, fresh, f_rest if rest.settled else None, f_true, p, moving)
-            )
-            await clock_run.sleep(period - (clock_run.now() - t))
+        rows = await _guide(
+            client,
+            reader,
+            est,
+            world,
+            tool,
+            hand or operator_script(duration),
+            duration=duration,
+            time_scale=time_scale,
+            gain=gain,
+            k_inc=k_inc,
+            dead_zone_mm=dead_zone_mm,
+            period=period,
+        )
     finally:
         await client.write("MYPOS", _mypos((0, 0, 0)))
-        if environment is not None:
-            await apply(np.zeros(6))
+        await world.stop()
         for i, v in enumerate(str(old_acc).split()[:6], 1):
             await client.write(f"$ACC_AXIS[{i}]", v)
     info["consistent_frac"] = reader.consistent_fraction
@@ -337,8 +244,54 @@ async def run_haptic(
     return report(rows, info, scored=scored, out_dir=out_dir, plots=plots)
 
 
-def _environment(wall: Wall | None, x: FloatArray) -> FloatArray:
-    return wall.wrench(x) if wall is not None else np.zeros(6)
+async def _guide(
+    client: Any,
+    reader: CycleReader,
+    est: ForceEstimator,
+    world: World,
+    tool: FloatArray,
+    hand_at: Callable[[float], FloatArray],
+    *,
+    duration: float,
+    time_scale: float,
+    gain: float,
+    k_inc: float,
+    dead_zone_mm: float,
+    period: float,
+) -> list[dict[str, float]]:
+    """The hand-guiding loop: read, estimate the force, render it on the device, jog by the
+    handle's displacement; one row per reading."""
+    rest = RestAverage(est)
+    r0 = await reader.read()
+    x0 = np.asarray(forward(MODEL, r0.q, tool=tool), float)[:3]
+    await world.apply(world.wrench_at(x0))
+    device, clock = HapticDevice(), Clock(time_scale)
+    rows: list[dict[str, float]] = []
+    rendered, last_inc, moving = np.zeros(3), np.zeros(3), False
+    t_prev = 0.0
+    while (t := clock.now()) < duration:
+        r = await reader.read()
+        f_true = world.true_force()
+        x = np.asarray(forward(MODEL, r.q, tool=tool), float)[:3]
+        f_rest = rest.update(r.q, r.qd, r.tau, r.tau_text, commanding=moving)
+        fresh = None
+        if r.motion is not None:
+            fresh = est.estimate(r.motion, r.tau)
+        if f_rest is not None:  # standing: the running mean since it stopped
+            rendered = f_rest
+        elif fresh is not None:  # a light low-pass (~2 readings) for the hand, not the score
+            rendered = rendered + 0.5 * (fresh - rendered)
+        p = device.step(hand_at(t), -gain * rendered, max(t - t_prev, 0.0))
+        t_prev = t
+        inc = _increment(p, k_inc, dead_zone_mm, moving)
+        if np.any(inc != last_inc):
+            await client.write("MYPOS", _mypos(inc))
+            last_inc = inc
+        moving = bool(np.any(inc != 0))
+        await world.follow(x)
+        rows.append(_row(t, x - x0, r, fresh, f_rest if rest.settled else None, f_true, p, moving))
+        await clock.sleep(period - (clock.now() - t))
+    return rows
 
 
 #: How much farther than the dead zone the handle must go to start a robot that stands (mm):

@@ -27,7 +27,7 @@ import asyncio
 import contextlib
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import AsyncIterator, Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -243,21 +243,11 @@ async def run_line_following(
     table = Table(w, h, scale_mm_per_px, tuple(table_pose))  # type: ignore[arg-type]
     detected = table.to_base(det.path_px)  # dense detected path in $BASE (mm)
     length = float(np.linalg.norm(np.diff(detected, axis=0), axis=1).sum())
-    res_mm = max(resolution_mm, length / 509)  # 512 rows minus approach and retract
-    line = vision.resample(detected, res_mm)
-    lift = np.array([0.0, 0.0, lift_mm])
-    xyz = np.vstack([line[0] + lift, line, line[-1] + lift])
-    poses = np.column_stack([xyz, np.tile(TOOL_DOWN, (len(xyz), 1))])
-    _check_reachable(model, poses)
+    xyz, poses = _poses(detected, length, resolution_mm, lift_mm, model)
 
     vel = speed if speed is not None else length / duration_s / 1000.0
-    old = await client.read_many(["$VEL.CP", "$ACC.CP", "$APO.CDIS"])
-    await client.write("$VEL.CP", round(vel, 6))
-    if acc is not None:
-        await client.write("$ACC.CP", acc)
-    await client.write("$APO.CDIS", cdis_mm)
     expected = (length + 2 * lift_mm + 400.0) / (vel * 1000.0) / time_scale
-    try:
+    async with _path_settings(client, vel, acc, cdis_mm):
         await client.write("$VEL.CP", approach_speed)
         await _execute(client, poses[:1], timeout=10 + 2.0 / approach_speed, poll=0.0, truth=None)
         await client.write("$VEL.CP", round(vel, 6))
@@ -269,45 +259,86 @@ async def run_line_following(
             truth=truth,
             truth_period=max(0.006 / time_scale, 0.002),
         )
-    finally:
-        for name, r in old.items():
-            if r.text is not None:
-                await client.write(name, r.text)
 
     data = physical if truth is not None else reported
     t, measured = data[:, 0] * time_scale, data[:, 1:4]
-    # On-line samples: those whose nearest point of the commanded polyline is on the line part
-    # (not on the approach from the start pose, nor on the lift at the end).
-    on = _on_line_mask(measured, xyz)
-    if not on.any():
-        raise RuntimeError("no sample of the executed path on the line: polling too slow?")
     reference = detected
     if ground_truth is not None:
         reference = table.to_base(np.asarray(ground_truth, dtype=np.float64))
-    err_xy = vision.polyline_distance(measured[:, :2], reference[:, :2])
-    err_z = np.abs(measured[:, 2] - table.pose[2])
-    track = vision.polyline_distance(measured[:, :2], detected[:, :2])[on]
-    e, ez = err_xy[on], err_z[on]
-    metrics: dict[str, float] = {
-        "max_error_mm": float(e.max()),
-        "rms_error_mm": float(np.sqrt(np.mean(e**2))),
-        "max_z_error_mm": float(ez.max()),
-    }
-    if ground_truth is not None:
-        metrics["detection_max_mm"] = float(
-            vision.polyline_distance(detected[:, :2], reference[:, :2]).max()
-        )
-        metrics["tracking_max_mm"] = float(track.max())
-    metrics.update(
-        path_length_mm=length,
-        points=float(len(poses)),
-        samples=float(on.sum()),
-    )
+    on, err_xy, err_z, metrics = _score(measured, xyz, detected, reference, table.pose[2])
+    if ground_truth is None:
+        del metrics["detection_max_mm"], metrics["tracking_max_mm"]
+    metrics.update(path_length_mm=length, points=float(len(poses)), samples=float(on.sum()))
     result = CaseResult("line following", metrics, dict(THESIS))
     write_outputs(result, out, xyz, t, measured, on, err_xy, err_z)
     if plots:
         figures(result, out, det, detected, reference, t, measured, on, err_xy, err_z)
     return result
+
+
+@contextlib.asynccontextmanager
+async def _path_settings(
+    client: Client, vel: float, acc: float | None, cdis_mm: float
+) -> AsyncIterator[None]:
+    """``$VEL.CP`` (m/s), ``$ACC.CP`` (if given) and ``$APO.CDIS`` set for the path, and
+    what they were written back after it, whatever happened."""
+    old = await client.read_many(["$VEL.CP", "$ACC.CP", "$APO.CDIS"])
+    await client.write("$VEL.CP", round(vel, 6))
+    if acc is not None:
+        await client.write("$ACC.CP", acc)
+    await client.write("$APO.CDIS", cdis_mm)
+    try:
+        yield
+    finally:
+        for name, r in old.items():
+            if r.text is not None:
+                await client.write(name, r.text)
+
+
+def _poses(
+    detected: np.ndarray, length: float, resolution_mm: float, lift_mm: float, model: RobotModel
+) -> tuple[np.ndarray, np.ndarray]:
+    """The commanded polyline (approach point, the line resampled, retract point) and its
+    poses (tool pointing down), checked reachable; at most 512 rows (MYPOSARRAY)."""
+    res_mm = max(resolution_mm, length / 509)  # 512 rows minus approach and retract
+    line = vision.resample(detected, res_mm)
+    lift = np.array([0.0, 0.0, lift_mm])
+    xyz = np.vstack([line[0] + lift, line, line[-1] + lift])
+    poses = np.column_stack([xyz, np.tile(TOOL_DOWN, (len(xyz), 1))])
+    _check_reachable(model, poses)
+    return xyz, poses
+
+
+def _score(
+    measured: np.ndarray,
+    xyz: np.ndarray,
+    detected: np.ndarray,
+    reference: np.ndarray,
+    table_z: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, float]]:
+    """The executed path against the line: which samples are on the line part, their XY
+    distance to ``reference`` and height error, and the figures of those samples (the
+    detection's own error and the tracking of the detected line too, for a known true line).
+    """
+    # On-line samples: those whose nearest point of the commanded polyline is on the line part
+    # (not on the approach from the start pose, nor on the lift at the end).
+    on = _on_line_mask(measured, xyz)
+    if not on.any():
+        raise RuntimeError("no sample of the executed path on the line: polling too slow?")
+    err_xy = vision.polyline_distance(measured[:, :2], reference[:, :2])
+    err_z = np.abs(measured[:, 2] - table_z)
+    track = vision.polyline_distance(measured[:, :2], detected[:, :2])[on]
+    e, ez = err_xy[on], err_z[on]
+    metrics = {
+        "max_error_mm": float(e.max()),
+        "rms_error_mm": float(np.sqrt(np.mean(e**2))),
+        "max_z_error_mm": float(ez.max()),
+        "detection_max_mm": float(
+            vision.polyline_distance(detected[:, :2], reference[:, :2]).max()
+        ),
+        "tracking_max_mm": float(track.max()),
+    }
+    return on, err_xy, err_z, metrics
 
 
 def _on_line_mask(pts: np.ndarray, xyz: np.ndarray) -> np.ndarray:

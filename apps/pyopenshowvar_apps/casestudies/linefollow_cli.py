@@ -8,6 +8,7 @@ command runs.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -87,22 +88,9 @@ def linefollow(
 
     from rich.console import Console
 
-    from pyopenshowvar import Client
     from pyopenshowvar_apps.casestudies.common import output_dir, summary_table
-    from pyopenshowvar_apps.casestudies.linefollow import (
-        Table,
-        camera_pose,
-        parked_store,
-        run_line_following,
-    )
     from pyopenshowvar_apps.casestudies.lineimage import generate_line_image
-    from pyopenshowvar_apps.common import Opts, calibration_seed, fail_for
-
-    def pixel(text: str | None) -> tuple[int, int] | None:
-        if text is None:
-            return None
-        x, y = (int(v) for v in text.split(","))
-        return (x, y)
+    from pyopenshowvar_apps.common import Opts, fail_for
 
     folder = output_dir(out)
     truth = None
@@ -114,43 +102,17 @@ def linefollow(
     emu: Any = None
     tcp = None  # the physical TCP of the emulated robot: the executed path is measured from it
     if Opts.emulate:  # kvp [--emulate] linefollow [--emulate]: an emulator running cart_path
-        from kukavarproxy_emu import EmulatorConfig, EmulatorThread
-        from pyopenshowvar_apps.casestudies.linefollow_vision import load_gray
-
-        h, w = load_gray(str(image)).shape
-        store = parked_store(camera_pose(Table(w, h, scale, pose)))  # type: ignore[arg-type]
-        config = EmulatorConfig(
-            port=0, program="cart_path", speed=speed, latency="kvp", plant=Opts.plant,
-            calibration_error=calibration_seed(calibration_error),
-        )  # fmt: skip
-        emu = EmulatorThread(config, store=store).start()
+        emu, tcp = _emulator(image, scale, pose, speed, calibration_error)
         host, port, scale_t = "127.0.0.1", emu.port, speed
-        plant = emu.emulator.robot.plant if emu.emulator.robot is not None else None
-        if plant is not None:
 
-            def tcp() -> Any:
-                return plant.truth.tcp[:3, 3]
-
-    async def job() -> Any:
-        async with Client(host, port, timeout=Opts.timeout) as client:
-            return await run_line_following(
-                client,
-                image,
-                start=pixel(start),
-                end=pixel(end),
-                resolution_mm=resolution,
-                scale_mm_per_px=scale,
-                table_pose=pose,
-                duration_s=duration,
-                cdis_mm=cdis,
-                time_scale=scale_t,
-                ground_truth=truth,
-                truth=tcp,
-                out_dir=folder,
-            )
+    options = dict(
+        start=_pixel(start), end=_pixel(end), resolution_mm=resolution, scale_mm_per_px=scale,
+        table_pose=pose, duration_s=duration, cdis_mm=cdis, time_scale=scale_t,
+        ground_truth=truth, truth=tcp, out_dir=folder,
+    )  # fmt: skip
 
     try:
-        result = asyncio.run(job())
+        result = asyncio.run(_follow(host, port, image, options))
     except (OSError, TimeoutError, RuntimeError, ValueError) as exc:
         fail_for(exc)
     finally:
@@ -159,3 +121,47 @@ def linefollow(
     Console().print(summary_table([result], title="Line following: ours vs thesis"))
     for f in result.files:
         typer.echo(f)
+
+
+def _emulator(
+    image: Path, scale: float, pose: tuple[float, ...], speed: float, calibration_error: str | None
+) -> tuple[Any, Callable[[], Any] | None]:
+    """An emulator running ``cart_path`` with the robot parked above the table (its camera
+    pose), and the physical TCP of its plant (None with the ideal plant)."""
+    from kukavarproxy_emu import EmulatorConfig, EmulatorThread
+    from pyopenshowvar_apps.casestudies.linefollow import Table, camera_pose, parked_store
+    from pyopenshowvar_apps.casestudies.linefollow_vision import load_gray
+    from pyopenshowvar_apps.common import Opts, calibration_seed
+
+    h, w = load_gray(str(image)).shape
+    store = parked_store(camera_pose(Table(w, h, scale, pose)))  # type: ignore[arg-type]
+    config = EmulatorConfig(
+        port=0, program="cart_path", speed=speed, latency="kvp", plant=Opts.plant,
+        calibration_error=calibration_seed(calibration_error),
+    )  # fmt: skip
+    emu = EmulatorThread(config, store=store).start()
+    plant = emu.emulator.robot.plant if emu.emulator.robot is not None else None
+    if plant is None:
+        return emu, None
+
+    def tcp() -> Any:
+        return plant.truth.tcp[:3, 3]
+
+    return emu, tcp
+
+
+async def _follow(host: str, port: int, image: Path, options: dict[str, Any]) -> Any:
+    from pyopenshowvar import Client
+    from pyopenshowvar_apps.casestudies.linefollow import run_line_following
+    from pyopenshowvar_apps.common import Opts
+
+    async with Client(host, port, timeout=Opts.timeout) as client:
+        return await run_line_following(client, image, **options)
+
+
+def _pixel(text: str | None) -> tuple[int, int] | None:
+    """An 'x,y' option (already checked by its callback) as a pixel."""
+    if text is None:
+        return None
+    x, y = (int(v) for v in text.split(","))
+    return (x, y)

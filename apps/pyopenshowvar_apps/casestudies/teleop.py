@@ -193,25 +193,13 @@ async def run_teleoperation(
                         inverse(MODEL, np.concatenate([x_t, orient]), current=theta_t), float
                     )
             else:
-                xdot = k_v * dead_zone(x_d)
-                x_t = velocity_target(x_t, xdot, dt_access)
-                # eq. 4.4 with the twist that reaches x_t from where θ_t points now (closed-loop
-                # IK): the Euler steps of θ_t would otherwise drift off x_t and the orientation
-                T = fk_matrix(MODEL, theta_t)
-                twist = np.concatenate([x_t - T[:3, 3], _rotvec(R0 @ T[:3, :3].T)]) / dt_access
-                qdot = dls_velocity_ik(MODEL, theta_t, twist)
-                theta_t = theta_t + np.asarray(qdot) * dt_access
+                x_t = velocity_target(x_t, k_v * dead_zone(x_d), dt_access)
+                theta_t = _follow_target(theta_t, x_t, R0, dt_access)
             theta_t = np.clip(theta_t, lower, upper)
             theta_s = np.clip(pid.update(theta_t, t - t_prev), lower, upper)
             t_prev = t
             await client.write("MYAXIS", _axis_text(theta_s))
-            row = {"t": t, "dt_access": dt_access}
-            row.update({f"hand_{a}": v for a, v in zip("xyz", hand.position, strict=True)})
-            row.update({f"target_{a}": v for a, v in zip("xyz", x_t, strict=True)})
-            row.update({f"actual_{a}": v for a, v in zip("xyz", x_a, strict=True)})
-            for key, values in (("theta_t", theta_t), ("theta_s", theta_s), ("theta_a", theta_a)):
-                row.update({f"{key}_{n}": float(v) for n, v in zip(AXES, values, strict=True)})
-            rows.append(row)
+            rows.append(_row(t, dt_access, hand.position, x_t, x_a, (theta_t, theta_s, theta_a)))
     finally:
         pump_task.cancel()
         with contextlib.suppress(asyncio.CancelledError):
@@ -220,6 +208,36 @@ async def run_teleoperation(
     n_access = client.stats.count - first_access
     access_ms = np.asarray(client.stats.samples()[-n_access:] if n_access else [], float) * 1e3
     return _report(rows, access_ms, mode, program, out_dir, plots)
+
+
+def _follow_target(
+    theta_t: FloatArray, x_t: FloatArray, R0: FloatArray, dt_access: float
+) -> FloatArray:
+    """One step of eq. 4.4 towards ``x_t`` (orientation ``R0``) from where ``theta_t`` points
+    now (closed-loop IK): Euler steps of the commanded velocity alone would drift off x_t and
+    the orientation."""
+    T = fk_matrix(MODEL, theta_t)
+    twist = np.concatenate([x_t - T[:3, 3], _rotvec(R0 @ T[:3, :3].T)]) / dt_access
+    qdot = dls_velocity_ik(MODEL, theta_t, twist)
+    return np.asarray(theta_t + np.asarray(qdot) * dt_access, dtype=np.float64)
+
+
+def _row(
+    t: float,
+    dt_access: float,
+    hand: FloatArray,
+    x_t: FloatArray,
+    x_a: FloatArray,
+    thetas: tuple[FloatArray, FloatArray, FloatArray],
+) -> dict[str, float]:
+    """One CSV row: the hand, the target and the actual TCP, and the target, sent and actual axes."""
+    row = {"t": t, "dt_access": dt_access}
+    row.update({f"hand_{a}": v for a, v in zip("xyz", hand, strict=True)})
+    row.update({f"target_{a}": v for a, v in zip("xyz", x_t, strict=True)})
+    row.update({f"actual_{a}": v for a, v in zip("xyz", x_a, strict=True)})
+    for key, values in zip(("theta_t", "theta_s", "theta_a"), thetas, strict=True):
+        row.update({f"{key}_{n}": float(v) for n, v in zip(AXES, values, strict=True)})
+    return row
 
 
 def _lag(t: FloatArray, target: FloatArray, actual: FloatArray) -> float:

@@ -92,15 +92,7 @@ def run_once(
     every = round(profile.control_period_s / dt)
     x_d = solver.fk(theta_t)
     plant = CranePlant(params, run.payload_kg, theta_t[0])
-    full = np.radians(np.asarray(ctl.full_spool_deg_s))
-    integ = np.zeros(3)
-
-    def valve(cmd: FloatArray, ff: FloatArray) -> FloatArray:
-        nonlocal integ
-        e = np.radians(cmd - plant.q)
-        integ = np.clip(integ + e * dt, -0.5 * full / ctl.ki, 0.5 * full / ctl.ki)
-        return np.asarray((ff + ctl.kp * e + ctl.ki * integ) / full)
-
+    valve = _Valves(ctl, plant, dt)
     if ship is not None:
         plant.set_gravity(ship.g_base[0])
     for _ in range(round(ctl.settle_s / dt)):  # the crane holds its start before the run
@@ -122,16 +114,8 @@ def run_once(
             # compensation currently applied (an iterative solver stopped by its budget would
             # otherwise return part of δθ, which would then be added again)
             q_s = np.clip(q_a - dtheta_prev, arm.lower, arm.upper)
-            if run.mode == "position":
-                theta_c = solver.position(x_d[k], q_s)
-                x_t = x_d[k]  # eq. 5.3: the target the solver was given
-            else:
-                # velocity mode integrates the server's own command (its θ_a is the
-                # commanded configuration, as a servoed arm reports it), steering towards
-                # the next target sample: x_t = x_c + ẋ·Δt
-                x_t, span = x_d[min(k + every, n - 1)], every * dt
-                xdot = (x_t - solver.fk(theta_c)) / span
-                theta_c = theta_c + solver.velocity(theta_c, xdot, span) * span
+            ahead = x_d[min(k + every, n - 1)]
+            theta_c, x_t = _solve(run.mode, solver, x_d[k], ahead, every * dt, theta_c, q_s)
             solve_ms[k] = 1000.0 * solver.last.time_s
             rate = (theta_c - ramp_from) / (every * dt)
         # the valves follow θ_c as a ramp over the control period (first-order hold), its
@@ -160,6 +144,43 @@ def run_once(
     if ship is not None:
         trace.earth_actual = ship.earth(trace.x_a)
     return trace
+
+
+class _Valves:
+    """The crane's valve servo: the command's rate fed forward plus PI on the joint error
+    (rad), the integral clamped to half a full spool; the output in full-spool units."""
+
+    def __init__(self, ctl: Controller, plant: CranePlant, dt: float) -> None:
+        self.ctl, self.plant, self.dt = ctl, plant, dt
+        self.full = np.radians(np.asarray(ctl.full_spool_deg_s))
+        self.integ = np.zeros(3)
+
+    def __call__(self, cmd: FloatArray, ff: FloatArray) -> FloatArray:
+        ctl, full = self.ctl, self.full
+        e = np.radians(cmd - self.plant.q)
+        self.integ = np.clip(self.integ + e * self.dt, -0.5 * full / ctl.ki, 0.5 * full / ctl.ki)
+        return np.asarray((ff + ctl.kp * e + ctl.ki * self.integ) / full)
+
+
+def _solve(
+    mode: str,
+    solver: Solver,
+    target: FloatArray,
+    ahead: FloatArray,
+    span: float,
+    theta_c: FloatArray,
+    q_s: FloatArray,
+) -> tuple[FloatArray, FloatArray]:
+    """The server's command for one control period of ``span`` s and the target it aimed at:
+    ``target`` is this sample's, ``ahead`` the one a period later; ``q_s`` is the crane as the
+    solver sees it (without the compensation applied)."""
+    if mode == "position":
+        return solver.position(target, q_s), target  # eq. 5.3: the target the solver was given
+    # velocity mode integrates the server's own command (its θ_a is the commanded
+    # configuration, as a servoed arm reports it), steering towards the next target sample:
+    # x_t = x_c + ẋ·Δt
+    xdot = (ahead - solver.fk(theta_c)) / span
+    return theta_c + solver.velocity(theta_c, xdot, span) * span, ahead
 
 
 def summarise(trace: Trace, profile: Profile) -> dict[str, Any]:

@@ -1,7 +1,7 @@
 """From KRC variables to Robotics-model values: what is read each poll, and what it means.
 
 Pure functions, no I/O: the poller hands in the typed values it read and gets back
-``{key: value}`` for the nodes of :class:`~.robotics.RobotNodes`. The mapping (also the table
+``{key: value}`` for the nodes of :class:`~.cellnodes.RobotNodes`. The mapping (also the table
 in docs/gateway.md):
 
 =====================================  =====================================================

@@ -32,14 +32,14 @@ from collections.abc import Mapping, Sequence
 from datetime import UTC, datetime
 from typing import Any
 
-from pyopenshowvar import Client, KrlEnum, KvpError, Struct, UnknownVariableError, parse_value
-from pyopenshowvar.errors import KrlValueError
-from pyopenshowvar.krl.parse import parse_number_list, parse_number_struct
+from pyopenshowvar import Client, KvpError, Struct, UnknownVariableError
 
 from ..armpick import DEFAULT_CHOICE, choose_arm, given_arm
 from . import ua
 from .budget import ValueTooLongError, WorkBudget
 from .cell import RobotConfig, SnapshotGroup, canonical
+from .cellnodes import CellNodes, RobotNodes
+from .fixednodes import publish_identity, publish_static
 from .livenodes import LiveNode, Sink
 from .mapping import (
     IDENTITY_VARIABLES,
@@ -50,8 +50,8 @@ from .mapping import (
     poll_values,
     text_of,
 )
-from .robotics import UNITS, CellNodes, RobotNodes
 from .schedule import next_slot, sleep_until
+from .values import SCALAR_TYPES, parse_text, variant_of
 
 __all__ = ["RobotPoller"]
 
@@ -60,15 +60,6 @@ log = logging.getLogger(__name__)
 BACKOFF_MIN, BACKOFF_MAX = 0.25, 2.0
 _V = ua.VariantType
 _MISSING = object()
-#: The moving robot's texts, in the fixed format a KRC prints: parsed by the fast paths (a
-#: tenth of parse_value's time), anything unexpected by parse_value.
-_FAST_PARSE = {
-    "$AXIS_ACT": parse_number_struct,
-    "$VEL_AXIS_ACT[]": parse_number_list,
-    "$TORQUE_AXIS_ACT[]": parse_number_list,
-    "$CURR_ACT[]": parse_number_list,
-    "$MOT_TEMP[]": parse_number_list,
-}
 
 
 class RobotPoller:
@@ -111,7 +102,7 @@ class RobotPoller:
         ]
         self._scalars = [
             (key, live(nodes.scalars[key]), vtype)
-            for key, vtype in _SCALAR_TYPES
+            for key, vtype in SCALAR_TYPES
             if key in nodes.scalars
         ]
         self._connected = None if nodes.connected is None else live(nodes.connected)
@@ -217,34 +208,8 @@ class RobotPoller:
         ident = identity_values(values)
         stamp = datetime.now(UTC)
         await self._arm(text_of(values.get("$MODEL_NAME[]")), stamp)
-        strings = {
-            "product_code": ident["product_code"],
-            "serial": ident["serial"],
-            "software_revision": ident["software_revision"],
-            "controller_product_code": "",
-            "controller_serial": "",
-            "motor_product_code": "",
-            "motor_serial": "",
-            "user_level": "",
-        }
-        texts = {
-            "manufacturer": "KUKA",
-            "model": ident["model"],
-            "name": ident["name"] or self.cfg.name,
-            "controller_manufacturer": "KUKA",
-            "controller_model": "KUKA Robot Controller (KRC)",
-            "motor_manufacturer": "KUKA",
-            "motor_model": "",
-            "software_manufacturer": "KUKA",
-            "software_model": "KUKA System Software",
-        }
-        for key, value in strings.items():
-            for node in self.nodes.identity.get(key, []):
-                await self.sink.set(node, value, _V.String, stamp)
-        for key, value in texts.items():
-            for node in self.nodes.identity.get(key, []):
-                await self.sink.set(node, ua.LocalizedText(value), _V.LocalizedText, stamp)
-        await self._static(stamp)
+        await publish_identity(self.nodes, self.sink, ident, self.cfg.name, stamp)
+        await publish_static(self.nodes, self.sink, stamp)
         return self.poll_names()
 
     async def _arm(self, model_name: str, stamp: datetime) -> None:
@@ -260,46 +225,6 @@ class RobotPoller:
         for i, node in enumerate(self.nodes.position_range):
             value = ua.Range(Low=float(model.lower[i]), High=float(model.upper[i]))
             await self.sink.set(node, value, _V.ExtensionObject, stamp)
-
-    async def _static(self, stamp: datetime) -> None:
-        """Values fixed by the model: category, motion profiles, units, task names."""
-        n, s = self.nodes, self.sink
-        for node in n.identity.get("category", []):
-            await s.set(node, 1, _V.Int32, stamp)  # ARTICULATED_ROBOT
-        for node in n.identity.get("motion_profile", []):
-            await s.set(node, 1, _V.Int32, stamp)  # ROTARY
-        tasks = self.nodes.tasks
-        if n.identity.get("task_reference") and "robot" in tasks:
-            robot_task = tasks["robot"].program_name
-            tc = ua.node_id(
-                ua.path_of(robot_task).rsplit(".ParameterSet.", 1)[0], robot_task.NamespaceIndex
-            )
-            await s.set(n.identity["task_reference"][0], tc, _V.NodeId, stamp)
-        for key, label in (
-            ("robot_task_name", "Robot interpreter ($PRO_STATE1)"),
-            ("submit_task_name", "Submit interpreter ($PRO_STATE0)"),
-        ):
-            for node in n.identity.get(key, []):
-                await s.set(node, ua.LocalizedText(label), _V.LocalizedText, stamp)
-        for task in tasks.values():  # 0 = Unknown: KVP cannot tell who changed the state
-            await s.set(task.last_transition_reason, 0, _V.Int16, stamp)
-        for key, label in (
-            ("estop_fn_name", "$ALARM_STOP"),
-            ("opsafe_fn_name", "$USER_SAF"),
-            ("stopmess_fn_name", "$STOPMESS"),
-        ):
-            for node in n.identity.get(key, []):
-                await s.set(node, label, _V.String, stamp)
-        for unit, nodes in (
-            ("deg", n.position),
-            ("deg/s", n.speed),
-            ("Nm", n.torque),
-            ("%", n.current),
-            ("degC", n.temperature),
-        ):
-            for node in nodes:
-                eu = ua.node_id(f"{ua.path_of(node)}.EngineeringUnits", node.NamespaceIndex)
-                await s.set(eu, UNITS[unit], _V.ExtensionObject, stamp)
 
     async def _apply(
         self, results: Mapping[str, Any], names: list[str], stamp: datetime
@@ -346,10 +271,7 @@ class RobotPoller:
             )
         budget = self.budget
         t0 = budget.clock()
-        fast = _FAST_PARSE.get(name)
-        value = fast(text) if fast is not None else None
-        if value is None:
-            value = _parse(text)
+        value = parse_text(name, text)
         budget.charge(budget.clock() - t0)
         if budget.should_yield():
             await asyncio.sleep(0)  # the other robots and the OPC UA clients get their turn
@@ -403,7 +325,7 @@ class RobotPoller:
                 await self._task_state(key, values[f"{key}_state"], stamp)
         for name, node in n.extras.items():
             if name in self._values and (changed is None or name in changed):
-                variant = _variant(self._values[name], self._texts.get(name, ""))
+                variant = variant_of(self._values[name], self._texts.get(name, ""))
                 await s.set_typed(node, variant.Value, variant.VariantType, stamp)
 
     async def _task_state(self, key: str, state: str, stamp: datetime) -> None:
@@ -441,20 +363,6 @@ class RobotPoller:
         self._values.clear()
 
 
-_SCALAR_TYPES = (
-    ("override", _V.Double),
-    ("in_control", _V.Boolean),
-    ("mode", _V.Int32),
-    ("estop", _V.Boolean),
-    ("pstop", _V.Boolean),
-    ("estop_fn_active", _V.Boolean),
-    ("opsafe_fn_active", _V.Boolean),
-    ("opsafe_fn_enabled", _V.Boolean),
-    ("stopmess_fn_active", _V.Boolean),
-    ("stopmess_fn_enabled", _V.Boolean),
-)
-
-
 # pyopenshowvar.core's advice to a client without auto_reconnect, in both of its forms
 _NO_RECONNECT = re.compile(
     r" \(auto_reconnect is off(: call connect\(\) to open a new connection)?\)"
@@ -464,25 +372,3 @@ _NO_RECONNECT = re.compile(
 def _reason(exc: BaseException) -> str:
     """The client's error without its advice to reconnect by hand: the poller reconnects."""
     return _NO_RECONNECT.sub("", str(exc))
-
-
-def _parse(text: str) -> Any:
-    try:
-        return parse_value(text)
-    except (KrlValueError, ValueError):
-        return text
-
-
-def _variant(value: Any, text: str) -> ua.Variant:
-    """An extra variable's value: scalars typed, anything else as its KRL text."""
-    if isinstance(value, bool):
-        return ua.Variant(value, _V.Boolean)
-    if isinstance(value, int):
-        return ua.Variant(value, _V.Int32)
-    if isinstance(value, float):
-        return ua.Variant(value, _V.Double)
-    if isinstance(value, KrlEnum):
-        return ua.Variant(str(value), _V.String)
-    if isinstance(value, str):
-        return ua.Variant(value, _V.String)
-    return ua.Variant(text, _V.String)

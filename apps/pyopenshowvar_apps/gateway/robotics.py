@@ -23,17 +23,15 @@ coupling is not modelled). NodeIds of the specification's types are its normativ
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Any
 
 from . import ua
+from .cellnodes import AXES, CellNodes, RobotNodes, TaskNodes
 from .clone import RobotTemplate
 from .model import DI_URI, GATEWAY_URI, ROBOTICS_URI, Instantiator, NodeBatch
 from .ua import Server
 
-__all__ = ["AXES", "CellNodes", "RobotNodes", "TaskNodes", "build_cell", "check_type_ids"]
-
-AXES = ("A1", "A2", "A3", "A4", "A5", "A6")
+__all__ = ["RobotBuilder", "build_cell", "check_type_ids"]
 
 # Normative NodeIds (OPC 40010-1 NodeSet 1.02, DI 1.05) with the browse name each must have.
 ROBOTICS_IDS = {
@@ -60,78 +58,6 @@ _ANALOG_UNIT = ua.node_id(ua.ObjectIds.AnalogUnitType)
 _DATA_VARIABLE = ua.node_id(ua.ObjectIds.BaseDataVariableType)
 _HAS_COMPONENT = ua.node_id(ua.ObjectIds.HasComponent)
 _HAS_ADDIN = ua.node_id(ua.ObjectIds.HasAddIn)
-_UNITS_URI = "http://www.opcfoundation.org/UA/units/un/cefact"
-
-
-def _unit(code: str, symbol: str, text: str) -> ua.EUInformation:
-    """A UNECE Rec 20 unit as OPC 10000-8 §5.6.3 encodes it (UnitId from the common code)."""
-    unit_id = 0
-    for ch in code:
-        unit_id = (unit_id << 8) | ord(ch)
-    return ua.EUInformation(
-        NamespaceUri=_UNITS_URI,
-        UnitId=unit_id,
-        DisplayName=ua.LocalizedText(symbol),
-        Description=ua.LocalizedText(text),
-    )
-
-
-UNITS = {
-    "deg": _unit("DD", "°", "degree"),
-    "deg/s": _unit("E96", "°/s", "degree per second"),
-    "Nm": _unit("NU", "N·m", "newton metre"),
-    "%": _unit("P1", "%", "percent"),
-    "degC": _unit("CEL", "°C", "degree Celsius"),
-}
-
-
-@dataclass
-class TaskNodes:
-    """One KRL interpreter as a TaskControl: program name, loaded flag, state machine."""
-
-    program_name: ua.NodeId
-    program_loaded: ua.NodeId
-    current_state: ua.NodeId
-    current_state_id: ua.NodeId
-    last_transition: ua.NodeId
-    last_transition_id: ua.NodeId
-    last_transition_reason: ua.NodeId
-
-
-@dataclass
-class RobotNodes:
-    """The NodeIds the poller writes for one robot."""
-
-    name: str
-    motion_device: ua.NodeId
-    controller: ua.NodeId
-    safety: ua.NodeId
-    #: identity key ("manufacturer", "model", ...) -> the nodes showing it
-    identity: dict[str, list[ua.NodeId]] = field(default_factory=dict)
-    position: list[ua.NodeId] = field(default_factory=list)
-    #: EURange of each ActualPosition: the arm's axis range (deg)
-    position_range: list[ua.NodeId] = field(default_factory=list)
-    speed: list[ua.NodeId] = field(default_factory=list)
-    torque: list[ua.NodeId] = field(default_factory=list)
-    current: list[ua.NodeId] = field(default_factory=list)
-    temperature: list[ua.NodeId] = field(default_factory=list)
-    scalars: dict[str, ua.NodeId] = field(default_factory=dict)
-    tasks: dict[str, TaskNodes] = field(default_factory=dict)
-    extras: dict[str, ua.NodeId] = field(default_factory=dict)
-    connected: ua.NodeId | None = None
-    write_method: ua.NodeId | None = None
-
-
-@dataclass
-class CellNodes:
-    system: ua.NodeId
-    motion_devices: ua.NodeId
-    controllers: ua.NodeId
-    safety_states: ua.NodeId
-    ns: dict[str, int]
-    #: TaskControlStateMachineType's states and transitions: name -> (NodeId, number)
-    states: dict[str, tuple[ua.NodeId, int]]
-    transitions: dict[str, tuple[ua.NodeId, int]]
 
 
 def _rid(ns: dict[str, int], name: str) -> ua.NodeId:

@@ -32,10 +32,11 @@ from asyncua.common.connection import TransportLimits
 
 from . import ua
 from .cell import CellConfig
+from .cellnodes import CellNodes, RobotNodes
 from .livenodes import Sink
 from .model import GATEWAY_URI, Instantiator, load_nodesets
 from .poller import RobotPoller
-from .robotics import CellNodes, RobotBuilder, RobotNodes, build_cell
+from .robotics import RobotBuilder, build_cell
 from .security import LoginGuard, ensure_certificate, trust_check
 from .sessions import GatewayServer
 from .ua import Server

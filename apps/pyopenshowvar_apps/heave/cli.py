@@ -12,9 +12,12 @@ import asyncio
 import json
 import math
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
+
+if TYPE_CHECKING:
+    from .experiment import HeavePlan
 
 __all__ = ["heave", "platform", "register"]
 
@@ -90,11 +93,7 @@ def heave(
     """Heave compensation on the wave platform (thesis §4.2.3): waves, compensation off then on."""
     from pyopenshowvar_apps.common import EXIT_USAGE, Opts, fail
 
-    from .control import ControlConfig
-    from .estimation import ATTITUDES
-    from .experiment import HeavePlan
-    from .operator import ScriptedOperator, select_operator, square
-    from .waves import WaveGenerator
+    from .operator import ScriptedOperator
 
     # --emulate: our own embedded set-up (the emulator running heave.src in its own process and
     # the platform simulator), not the generic embedded emulator
@@ -106,6 +105,47 @@ def heave(
             )
         _sweep(seed, out, as_json)
         return
+    plan = _plan(attitude, waves, frequency, seed, periods, duration, lead, operator)
+
+    def say(text: str) -> None:
+        if not as_json:
+            typer.echo(f"heave: {text}", err=True)
+
+    chosen = plan.operator
+    if chosen is not None and not isinstance(chosen, ScriptedOperator):
+        say(f"operator: {chosen.name} (toggle compensation: space / button A, quit: q / B)")
+    try:
+        result = _run(plan, embedded, modbus, accel, seed, out, plots, say)
+    except KeyboardInterrupt:
+        raise
+    except BaseException as exc:
+        _fail(exc)
+        return
+    if as_json:
+        typer.echo(json.dumps(result.as_json(), indent=1))
+    else:
+        _print(result)
+
+
+def _plan(
+    attitude: str,
+    waves: str,
+    frequency: float,
+    seed: int,
+    periods: int,
+    duration: float | None,
+    lead: float | None,
+    operator: str,
+) -> HeavePlan:
+    """The experiment the options ask for (a usage error for options that do not fit)."""
+    from pyopenshowvar_apps.common import EXIT_USAGE, fail
+
+    from .control import ControlConfig
+    from .estimation import ATTITUDES
+    from .experiment import HeavePlan
+    from .operator import select_operator, square
+    from .waves import WaveGenerator
+
     if attitude not in ATTITUDES or waves not in ("thesis", "random") or frequency <= 0:
         fail(EXIT_USAGE, "--attitude fused|accel|plc, --waves thesis|random and --frequency > 0")
     control = ControlConfig(attitude=attitude, lead=lead)
@@ -122,24 +162,7 @@ def heave(
         )
     except (LookupError, ValueError) as exc:
         fail(EXIT_USAGE, str(exc))
-
-    def say(text: str) -> None:
-        if not as_json:
-            typer.echo(f"heave: {text}", err=True)
-
-    if not isinstance(plan.operator, ScriptedOperator):
-        say(f"operator: {plan.operator.name} (toggle compensation: space / button A, quit: q / B)")
-    try:
-        result = _run(plan, embedded, modbus, accel, seed, out, plots, say)
-    except KeyboardInterrupt:
-        raise
-    except BaseException as exc:
-        _fail(exc)
-        return
-    if as_json:
-        typer.echo(json.dumps(result.as_json(), indent=1))
-    else:
-        _print(result)
+    return plan
 
 
 def _run(

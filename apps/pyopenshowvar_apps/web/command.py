@@ -62,9 +62,8 @@ def web(
 
     With the global --emulate, an embedded emulator runs the KVP_JOG program.
     """
-    from pyopenshowvar_apps.armpick import given_arm
     from pyopenshowvar_apps.hosts import is_loopback
-    from pyopenshowvar_apps.web.runner import KRL_DIR, WebServer, lan_address
+    from pyopenshowvar_apps.web.runner import KRL_DIR
 
     if krl_dir is not None:
         krl_dir.mkdir(parents=True, exist_ok=True)
@@ -87,40 +86,46 @@ def web(
     if token is None and not is_loopback(bind):
         token = secrets.token_urlsafe(12)
 
-    async def main() -> None:
-        try:
-            server = WebServer(
-                Opts.host,
-                Opts.port,
-                bind=bind,
-                http_port=http_port,
-                token=token,
-                hz=hz,
-                timeout=Opts.timeout,
-                emulated=Opts.emulator is not None,
-                allow_motion_writes=allow_motion_writes,
-                arm=given_arm(Opts.robot) if Opts.robot else None,
-            )
-        except OSError as exc:
-            fail(EXIT_USAGE, f"cannot serve on {bind}:{http_port}: {exc.strerror or exc}")
-        async with server:
-            typer.echo(f"serving on {server.url}")
-            host = lan_address() if bind in ("0.0.0.0", "::") else bind
-            typer.echo(
-                f"robot: KVP {Opts.where()}" + (" (embedded emulator)" if Opts.emulator else "")
-            )
-            if allow_motion_writes:
-                typer.echo("the watch list may write variables that move the robot")
-            if token is not None:
-                typer.echo(f"token: {token}")
-            typer.echo(f"open {server.page_url(host)}")
-            if token is not None and not is_loopback(bind):
-                _print_qr(server.page_url(host))
-            typer.echo("Ctrl-C stops the server (and any jog).")
-            await server.wait()
-
     with contextlib.suppress(KeyboardInterrupt):
-        asyncio.run(main())
+        asyncio.run(_serve(bind, http_port, token, hz, allow_motion_writes))
+
+
+async def _serve(
+    bind: str, http_port: int, token: str | None, hz: float, allow_motion_writes: bool
+) -> None:
+    """Serve the pad until Ctrl-C, saying where and how to open it."""
+    from pyopenshowvar_apps.armpick import given_arm
+    from pyopenshowvar_apps.hosts import is_loopback
+    from pyopenshowvar_apps.web.runner import WebServer, lan_address
+
+    try:
+        server = WebServer(
+            Opts.host,
+            Opts.port,
+            bind=bind,
+            http_port=http_port,
+            token=token,
+            hz=hz,
+            timeout=Opts.timeout,
+            emulated=Opts.emulator is not None,
+            allow_motion_writes=allow_motion_writes,
+            arm=given_arm(Opts.robot) if Opts.robot else None,
+        )
+    except OSError as exc:
+        fail(EXIT_USAGE, f"cannot serve on {bind}:{http_port}: {exc.strerror or exc}")
+    async with server:
+        typer.echo(f"serving on {server.url}")
+        host = lan_address() if bind in ("0.0.0.0", "::") else bind
+        typer.echo(f"robot: KVP {Opts.where()}" + (" (embedded emulator)" if Opts.emulator else ""))
+        if allow_motion_writes:
+            typer.echo("the watch list may write variables that move the robot")
+        if token is not None:
+            typer.echo(f"token: {token}")
+        typer.echo(f"open {server.page_url(host)}")
+        if token is not None and not is_loopback(bind):
+            _print_qr(server.page_url(host))
+        typer.echo("Ctrl-C stops the server (and any jog).")
+        await server.wait()
 
 
 def _print_qr(url: str) -> None:
