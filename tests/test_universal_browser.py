@@ -1,5 +1,6 @@
 """``kvp universal``'s page in headless Chromium: the pad's 3D view draws any arm, a held button
-moves it, letting go stops it; saves the screenshot docs/universal.png. Skipped (with the
+moves it, letting go stops it; takes a screenshot (docs/universal.png with
+KVP_SAVE_SCREENSHOTS=1). Skipped (with the
 reason as a warning) where no browser can be installed, like the web pad's browser test,
 whose Chromium fixture this reuses."""
 
@@ -14,15 +15,13 @@ import numpy as np
 from pyopenshowvar_apps.universal.server import ControlServer
 from pyopenshowvar_apps.universal.sim import SimulatedArm
 from pyopenshowvar_apps.universal.web import ViewServer, WebInput
-from test_web_browser import _wait_js, browser  # noqa: F401 - the Chromium fixture
+from test_web_browser import _wait_js, browser, screenshot_path  # noqa: F401 - the Chromium fixture
 
 from kukavarproxy_emu.testing import wait_until
 from pyopenshowvar.arms import load_arm
 
-SHOT = Path(__file__).resolve().parents[1] / "docs" / "universal.png"
 
-
-async def test_universal_page_in_chromium(browser: Any) -> None:  # noqa: F811
+async def test_universal_page_in_chromium(browser: Any, tmp_path: Path) -> None:  # noqa: F811
     web_input = WebInput()
     backend = SimulatedArm(load_arm("knuckle_boom_crane"))
     server = ControlServer(backend, web_input, solver="closed-form", mode="velocity",
@@ -52,7 +51,7 @@ async def test_universal_page_in_chromium(browser: Any) -> None:  # noqa: F811
             await wait_until(lambda: np.all(server.ticks[-1].signal == 0), 20, what="let go")
             assert server.ticks[-1].alive
             assert server.ticks[-1].tip[2] - tip0[2] > 100.0  # the crane's tip went up
-            await page.screenshot(path=str(SHOT))
+            await page.screenshot(path=str(screenshot_path("universal.png", tmp_path)))
             assert not errors, errors
     finally:
         loop.cancel()

@@ -3,7 +3,7 @@
 The page is loaded from a web server talking KVP to an emulator that runs the shipped KVP_JOG
 program. The test holds "A1 +" with the mouse and checks over KVP that A1 moved and stopped
 after the release, that hiding the tab stops a jog, that the page refuses to work without the
-token, and saves a screenshot to docs/web.png. It is skipped (with the reason as a warning)
+token, and takes a screenshot (docs/web.png with KVP_SAVE_SCREENSHOTS=1). It is skipped (with the reason as a warning)
 only where no browser can be installed; .ci/run installs chromium with apt-get.
 """
 
@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import importlib.util
+import os
 import shutil
 import warnings
 from collections.abc import AsyncIterator
@@ -24,7 +25,16 @@ from kukavarproxy_emu import Emulator, EmulatorConfig
 from pyopenshowvar import Client
 
 TOKEN = "browser-token-42"
-SCREENSHOT = Path(__file__).resolve().parents[1] / "docs" / "web.png"
+DOCS = Path(__file__).resolve().parents[1] / "docs"
+
+
+def screenshot_path(name: str, tmp_path: Path) -> Path:
+    """Where a browser test saves its screenshot: ``docs/NAME`` when KVP_SAVE_SCREENSHOTS=1
+    (to refresh the documentation's pictures), else the test's own folder, so that a test run
+    never changes a tracked file."""
+    return (DOCS if os.environ.get("KVP_SAVE_SCREENSHOTS") == "1" else tmp_path) / name
+
+
 #: What Chromium needs to run as root in a container, isolated from the network and profile.
 CHROMIUM_ARGS = [
     "--headless",
@@ -89,7 +99,7 @@ async def _settled(kvp: Client) -> float:
     return b
 
 
-async def test_jog_pad_in_chromium(browser: Any) -> None:
+async def test_jog_pad_in_chromium(browser: Any, tmp_path: Path) -> None:
     config = EmulatorConfig(
         port=0,
         program=str(KRL_DIR / "kvp_jog.src"),
@@ -150,6 +160,6 @@ async def test_jog_pad_in_chromium(browser: Any) -> None:
         assert rate >= 10.0, f"live updates at {rate:.1f} Hz"
         shown = await page.locator('.row[data-key="A1"] .val').text_content()
         assert abs(float(shown.rstrip("°")) - a1_hidden) < 0.03  # the view shows where A1 is
-        await page.screenshot(path=str(SCREENSHOT))
+        await page.screenshot(path=str(screenshot_path("web.png", tmp_path)))
         assert not errors, errors
         print(f"first state {first_state_ms:.0f} ms after navigation, live rate {rate:.1f} Hz")
