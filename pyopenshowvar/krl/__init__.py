@@ -15,8 +15,9 @@ from __future__ import annotations
 from .format import format_krc4, format_value
 from .numfmt import float32, format_real_krc4, format_real_shortest
 from .parse import parse_array, parse_value
+from .poses import TYPED_STRUCTS, Axis, E6Axis, E6Pos, Frame, Pos
 from .typedefs import BUILTIN_TYPES, EnumDef, Kind, StructDef, TypeRegistry, TypeSpec
-from .types import TYPED_STRUCTS, Axis, E6Axis, E6Pos, Frame, KrlEnum, KrlValue, Pos, Struct
+from .types import KrlEnum, KrlValue, Struct
 
 __all__ = [
     "BUILTIN_TYPES",

@@ -17,8 +17,9 @@ import math
 import re
 
 from ..errors import KrlValueError
+from .poses import TYPED_STRUCTS
 from .typedefs import BUILTIN_TYPES, Kind, TypeRegistry, TypeSpec
-from .types import TYPED_STRUCTS, KrlEnum, KrlValue, Struct
+from .types import KrlEnum, KrlValue, Struct
 
 __all__ = ["parse_array", "parse_number_list", "parse_number_struct", "parse_value"]
 
