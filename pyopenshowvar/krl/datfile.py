@@ -26,10 +26,11 @@ are case-insensitive)::
 
 from __future__ import annotations
 
-import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from .datline import DatSyntaxError, Line, comment_start
 
 __all__ = [
     "MAX_ELEMENTS",
@@ -48,35 +49,12 @@ __all__ = [
 #: declaration costs (a KRC's data memory holds far less); larger arrays are a syntax error.
 MAX_ELEMENTS = 1 << 18
 
-_IDENT = re.compile(r"[A-Za-z_$][A-Za-z0-9_$]*")
-_INT = re.compile(r"[+-]?[0-9]+")
 # Statements that declare procedures/functions of other modules: nothing for a data store.
 _IGNORED_KEYWORDS = frozenset({"EXT", "EXTFCT", "EXTP", "EXTFCTP", "IMPORT"})
 # Words that can never be a variable name in a declaration; catching them gives better errors.
 _RESERVED = frozenset(
     {"DECL", "GLOBAL", "CONST", "STRUC", "ENUM", "DEFDAT", "ENDDAT", "PUBLIC", *_IGNORED_KEYWORDS}
 )
-
-
-class DatSyntaxError(ValueError):
-    """A line of a data list that is not valid declaration syntax.
-
-    The message names file, line and column and quotes the offending text, so the error can be
-    shown to the user as is.
-    """
-
-    def __init__(self, message: str, *, filename: str, line: int, column: int, text: str) -> None:
-        super().__init__(self.format(message, filename, line, column, text))
-        self.reason = message
-        self.filename = filename
-        self.line = line
-        self.column = column
-        self.text = text
-
-    @staticmethod
-    def format(message: str, filename: str, line: int, column: int, text: str) -> str:
-        """The message shown to the user; subclasses change only the layout."""
-        return f"{filename}:{line}:{column}: {message}: {text.strip()!r}"
 
 
 @dataclass(frozen=True, slots=True)
@@ -145,112 +123,6 @@ class DatFile:
     enums: tuple[EnumDecl, ...]
 
 
-class _Line:
-    """A cursor over one source line; every error it raises points at the current column."""
-
-    def __init__(self, text: str, lineno: int, filename: str, end: int) -> None:
-        self.text = text
-        self.lineno = lineno
-        self.filename = filename
-        self.pos = 0
-        self.end = end  # where the comment starts: the statement ends there
-
-    def error(self, message: str, pos: int | None = None) -> DatSyntaxError:
-        column = (self.pos if pos is None else pos) + 1
-        return DatSyntaxError(
-            message, filename=self.filename, line=self.lineno, column=column, text=self.text
-        )
-
-    def skip_ws(self) -> None:
-        while self.pos < self.end and self.text[self.pos] in " \t\f\v\r":
-            self.pos += 1
-
-    def mark(self) -> int:
-        """The position of the next token (for error columns)."""
-        self.skip_ws()
-        return self.pos
-
-    def at_end(self) -> bool:
-        self.skip_ws()
-        return self.pos >= self.end
-
-    def peek(self) -> str:
-        self.skip_ws()
-        return self.text[self.pos] if self.pos < self.end else ""
-
-    def accept(self, char: str) -> bool:
-        if self.peek() == char:
-            self.pos += 1
-            return True
-        return False
-
-    def expect(self, char: str, what: str) -> None:
-        if not self.accept(char):
-            raise self.error(f"expected {what}")
-
-    def ident(self, what: str = "a name") -> str:
-        self.skip_ws()
-        match = _IDENT.match(self.text, self.pos, self.end)
-        if match is None:
-            raise self.error(f"expected {what}")
-        self.pos = match.end()
-        return match.group().upper()
-
-    def peek_ident(self) -> str | None:
-        self.skip_ws()
-        match = _IDENT.match(self.text, self.pos, self.end)
-        return match.group().upper() if match else None
-
-    def integer(self, what: str) -> int:
-        self.skip_ws()
-        match = _INT.match(self.text, self.pos, self.end)
-        if match is None:
-            raise self.error(f"expected {what}")
-        if len(match.group()) > 18:  # int() refuses > 4300 digits; no KRL number is that long
-            raise self.error(f"{what} is too large")
-        self.pos = match.end()
-        return int(match.group())
-
-    def value_text(self, *, stop_at_comma: bool) -> str:
-        """Literal text up to a top-level comma (or the end), skipping nested braces and strings."""
-        self.skip_ws()
-        start, depth, pos = self.pos, 0, self.pos
-        while pos < self.end:
-            char = self.text[pos]
-            if char == '"':
-                close = self.text.find('"', pos + 1, self.end)
-                if close < 0:
-                    raise self.error("unterminated string", pos)
-                pos = close
-            elif char == "{":
-                depth += 1
-            elif char == "}":
-                depth -= 1
-                if depth < 0:
-                    raise self.error("unbalanced '}'", pos)
-            elif char == "," and depth == 0 and stop_at_comma:
-                break
-            pos += 1
-        if depth:
-            raise self.error("unbalanced '{'", start)
-        self.pos = pos
-        text = self.text[start:pos].strip()
-        if not text:
-            raise self.error("expected a value after '='")
-        return text
-
-
-def _comment_start(text: str) -> int:
-    """Index of the ``;`` that starts the comment, ignoring ``;`` inside string literals."""
-    in_string = False
-    for index, char in enumerate(text):
-        if char == '"':
-            in_string = not in_string
-        elif char == ";" and not in_string:
-            return index
-    return len(text)
-
-
 class _Parser:
     def __init__(self, filename: str) -> None:
         self.filename = filename
@@ -262,7 +134,7 @@ class _Parser:
         self.structs: list[StrucDecl] = []
         self.enums: list[EnumDecl] = []
 
-    def statement(self, line: _Line) -> None:
+    def statement(self, line: Line) -> None:
         if self.ended:
             raise line.error("text after ENDDAT")
         start = line.pos
@@ -284,7 +156,7 @@ class _Parser:
         if not line.at_end():
             raise line.error("unexpected text")
 
-    def _declaration(self, line: _Line, word: str, start: int) -> None:
+    def _declaration(self, line: Line, word: str, start: int) -> None:
         is_global = is_const = has_decl = False
         # The modifiers may come in either order (KSS accepts "GLOBAL DECL" and "DECL GLOBAL").
         while word in ("GLOBAL", "DECL", "CONST"):
@@ -302,7 +174,7 @@ class _Parser:
         else:
             self._assignment(line, word, start)
 
-    def _decl_items(self, line: _Line, type_name: str, is_global: bool, is_const: bool) -> None:
+    def _decl_items(self, line: Line, type_name: str, is_global: bool, is_const: bool) -> None:
         if type_name in _RESERVED:
             raise line.error("expected a type name", line.pos - len(type_name))
         while True:
@@ -322,7 +194,7 @@ class _Parser:
             if not line.accept(","):
                 return
 
-    def _dims(self, line: _Line) -> tuple[int, ...]:
+    def _dims(self, line: Line) -> tuple[int, ...]:
         dims = []
         count = 1
         while True:
@@ -341,7 +213,7 @@ class _Parser:
                 return tuple(dims)
             line.expect(",", "',' or ']'")
 
-    def _assignment(self, line: _Line, name: str, start: int) -> None:
+    def _assignment(self, line: Line, name: str, start: int) -> None:
         target = name
         if line.accept("["):
             if line.accept("]"):
@@ -359,7 +231,7 @@ class _Parser:
         value = line.value_text(stop_at_comma=False)
         self.assignments.append(Assignment(target, value, line.lineno, start + 1))
 
-    def _struc(self, line: _Line, is_global: bool) -> StrucDecl:
+    def _struc(self, line: Line, is_global: bool) -> StrucDecl:
         name = line.ident("the structure name")
         members: list[tuple[str, str]] = []
         seen: set[str] = set()
@@ -389,7 +261,7 @@ class _Parser:
             else:
                 line.pos = save
 
-    def _enum(self, line: _Line, is_global: bool) -> EnumDecl:
+    def _enum(self, line: Line, is_global: bool) -> EnumDecl:
         name = line.ident("the enumeration name")
         values: list[str] = []
         while True:
@@ -417,7 +289,7 @@ def parse_declaration(raw: str, lineno: int, column: int, filename: str = "<src>
     """Parse the one declaration (DECL, STRUC, ENUM...) starting at ``column`` (1-based) of a
     source line: the KRL parser hands declaration lines inside a DEF to this same parser."""
     parser = _Parser(filename)
-    line = _Line(raw, lineno, filename, _comment_start(raw))
+    line = Line(raw, lineno, filename, comment_start(raw))
     line.pos = column - 1
     parser.statement(line)
     return parser.result()
@@ -436,7 +308,7 @@ def parse_dat(
         # "&ACCESS RVP", "&REL 1", "&PARAM ..." are editor metadata, not KRL.
         if not stripped or stripped.startswith("&"):
             continue
-        line = _Line(raw, lineno, filename, _comment_start(raw))
+        line = Line(raw, lineno, filename, comment_start(raw))
         if line.at_end():
             continue
         parser.statement(line)
