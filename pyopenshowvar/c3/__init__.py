@@ -11,7 +11,8 @@ by the client and the emulator, plus the client operations built on it:
 * :mod:`~pyopenshowvar.c3.messages`, :mod:`~pyopenshowvar.c3.files` — requests (and the file
   replies), :mod:`~pyopenshowvar.c3.replies` — replies and the footer;
 * :mod:`~pyopenshowvar.c3.server` — is the server KVP or C3 Bridge, which version and messages;
-* :mod:`~pyopenshowvar.c3.ops`, :mod:`~pyopenshowvar.c3.ops_programs` — the client operations,
+* :mod:`~pyopenshowvar.c3.ops`, :mod:`~pyopenshowvar.c3.ops_programs`, :mod:`~pyopenshowvar.c3.ops_files` —
+  the client operations,
   :mod:`~pyopenshowvar.c3.api` — them as methods of the asyncio and the blocking client.
 
 See docs/c3bridge.md.

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 from ..core import LazyOps, as_async_method, as_sync_method, lazy_async_method, lazy_sync_method
 
 if TYPE_CHECKING:
-    from . import ops, ops_programs
+    from . import ops, ops_files, ops_programs
     from .server import ServerInfo
 
     _async, _sync = as_async_method, as_sync_method
@@ -24,6 +24,7 @@ else:
     # method is first used, not with the client: ``kvp read`` never needs it. mypy checks the
     # methods as written below with the real operations (the branch above).
     ops, ops_programs = LazyOps(f"{__package__}.ops"), LazyOps(f"{__package__}.ops_programs")
+    ops_files = LazyOps(f"{__package__}.ops_files")
     _async, _sync = lazy_async_method, lazy_sync_method
 
 __all__ = ["C3Methods", "SyncC3Methods"]
@@ -58,17 +59,17 @@ class C3Methods(_C3State):
     program_cancel = _async(ops_programs.program_cancel)
     program_state = _async(ops_programs.program_state)
     program_upload = _async(ops_programs.program_upload)
-    file_list = _async(ops_programs.file_list)
-    file_properties = _async(ops_programs.file_properties)
-    file_full_name = _async(ops_programs.file_full_name)
-    file_krc_name = _async(ops_programs.file_krc_name)
-    file_read = _async(ops_programs.file_read)
-    file_write = _async(ops_programs.file_write)
-    file_delete = _async(ops_programs.file_delete)
-    file_create = _async(ops_programs.file_create)
-    file_copy = _async(ops_programs.file_copy)
-    file_move = _async(ops_programs.file_move)
-    file_set_attribute = _async(ops_programs.file_set_attribute)
+    file_list = _async(ops_files.file_list)
+    file_properties = _async(ops_files.file_properties)
+    file_full_name = _async(ops_files.file_full_name)
+    file_krc_name = _async(ops_files.file_krc_name)
+    file_read = _async(ops_files.file_read)
+    file_write = _async(ops_files.file_write)
+    file_delete = _async(ops_files.file_delete)
+    file_create = _async(ops_files.file_create)
+    file_copy = _async(ops_files.file_copy)
+    file_move = _async(ops_files.file_move)
+    file_set_attribute = _async(ops_files.file_set_attribute)
 
 
 class SyncC3Methods(_C3State):
@@ -93,14 +94,14 @@ class SyncC3Methods(_C3State):
     program_cancel = _sync(ops_programs.program_cancel)
     program_state = _sync(ops_programs.program_state)
     program_upload = _sync(ops_programs.program_upload)
-    file_list = _sync(ops_programs.file_list)
-    file_properties = _sync(ops_programs.file_properties)
-    file_full_name = _sync(ops_programs.file_full_name)
-    file_krc_name = _sync(ops_programs.file_krc_name)
-    file_read = _sync(ops_programs.file_read)
-    file_write = _sync(ops_programs.file_write)
-    file_delete = _sync(ops_programs.file_delete)
-    file_create = _sync(ops_programs.file_create)
-    file_copy = _sync(ops_programs.file_copy)
-    file_move = _sync(ops_programs.file_move)
-    file_set_attribute = _sync(ops_programs.file_set_attribute)
+    file_list = _sync(ops_files.file_list)
+    file_properties = _sync(ops_files.file_properties)
+    file_full_name = _sync(ops_files.file_full_name)
+    file_krc_name = _sync(ops_files.file_krc_name)
+    file_read = _sync(ops_files.file_read)
+    file_write = _sync(ops_files.file_write)
+    file_delete = _sync(ops_files.file_delete)
+    file_create = _sync(ops_files.file_create)
+    file_copy = _sync(ops_files.file_copy)
+    file_move = _sync(ops_files.file_move)
+    file_set_attribute = _sync(ops_files.file_set_attribute)
