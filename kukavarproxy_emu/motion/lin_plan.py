@@ -22,7 +22,8 @@ from pyopenshowvar.kinematics import fk_matrix, forward, inverse, matrix_to_fram
 from pyopenshowvar.krl import Struct
 
 from .dynamics import ControllerDynamics
-from .path import LinGeometry, PathLimits, PathRefused, joint_path, leave_wrist_singularity
+from .joint_path import LinGeometry, PathRefused, joint_path, leave_wrist_singularity
+from .path import PathLimits
 from .profiles import FloatArray, Profile
 from .retime import blend_ratio, check_accelerations
 from .segments import Kind, Segment, blend, rotation_log, rotvec_matrix

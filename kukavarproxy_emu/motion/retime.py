@@ -30,7 +30,8 @@ from collections.abc import Callable, Generator
 
 import numpy as np
 
-from .path import IK_BATCH, LinGeometry, PathLimits
+from .joint_path import IK_BATCH, LinGeometry
+from .path import PathLimits
 from .profiles import Curve, FloatArray, Profile
 from .segments import Segment
 

@@ -31,7 +31,8 @@ from enum import Enum
 
 import numpy as np
 
-from .path import PathLimits, PathRefused
+from .joint_path import PathRefused
+from .path import PathLimits
 from .profiles import Curve, FloatArray, Profile, pl_min, ramp_curve, scalar_limits
 
 __all__ = ["ConstLimits", "Kind", "Segment", "blend", "rotation_log", "rotvec_matrix"]
