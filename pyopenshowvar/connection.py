@@ -242,6 +242,10 @@ class Connection(LinkBase[_Fut]):
                 pendings.append(pending)
                 batch.append(pending)
             self._send(batch)
+            # Armed again now that the requests are registered: one that waited for room may
+            # have been registered after the watchdog last ran, found nothing due later and
+            # went quiet (it re-arms only for the requests it sees), and would wait forever.
+            self._watch(loop, deadline)
             results: list[Reply | KvpError] = []
             for p in pendings:  # every outcome is collected before anything is raised
                 try:

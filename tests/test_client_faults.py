@@ -281,3 +281,25 @@ async def test_garbage_reply_drops_the_connection_with_a_protocol_message() -> N
         with pytest.raises(KvpConnectionError, match="shorter than the minimum"):
             await kvp.read("X")
         assert not kvp.connected
+
+
+async def test_a_request_that_waited_for_the_slot_still_times_out() -> None:
+    """A request registered after the watchdog last ran gets a watchdog of its own.
+
+    Until the ids are known only one request is in flight. A waited for the slot behind B; B's
+    deadline fired the watchdog, which found no other request yet and went quiet; A, sent the
+    moment B gave up, then waited forever (seen as a 60-second hang of the test above under
+    load). Now A times out at its own deadline."""
+
+    async def handler(req: Request, w: asyncio.StreamWriter, n: int) -> None:
+        await asyncio.sleep(10)  # never answers
+
+    async with broken_server(handler) as port, Client(port=port, timeout=0.2) as kvp:
+        t0 = time.monotonic()
+        first = asyncio.ensure_future(kvp.read("B"))
+        await asyncio.sleep(0)  # B takes the slot
+        results = await asyncio.wait_for(
+            asyncio.gather(first, kvp.read("A", timeout=0.6), return_exceptions=True), 5.0
+        )
+        assert all(isinstance(r, KvpTimeoutError) for r in results), results
+        assert 0.5 < time.monotonic() - t0 < 2.0

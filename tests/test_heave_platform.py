@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+import os
 
 import numpy as np
 import pytest
@@ -224,3 +225,28 @@ async def test_accelerometer_stream_over_the_serial_device() -> None:
             reader.close()
         assert 60 < rate < 140  # 100 Hz, with a loaded machine's slack
         assert reader.rejected == 0
+
+
+async def test_the_reader_drops_what_came_before_it_listened_and_a_torn_first_line() -> None:
+    """A port opened mid-stream: the bytes buffered before (old samples) and the rest of the
+    line being sent are dropped, not taken as a sample or counted as rejected lines."""
+    import tty
+
+    master, slave = os.openpty()
+    try:
+        tty.setraw(slave)
+        os.write(master, b"1,1.000,1.000\n2,2.000")  # sent before anyone listened
+        opening = asyncio.ensure_future(AccelReader(os.ttyname(slave)).open(timeout=5.0))
+        await asyncio.sleep(0)  # the reader opened the port and waits for its first line
+        os.write(master, b"0\n4,4.000,-4.000\n")  # the torn line's end, then a whole one
+        reader = await opening
+        try:
+            assert reader.latest is not None and reader.latest.millis == 4
+            assert (reader.latest.roll, reader.latest.pitch) == (4.0, -4.0)
+            assert reader.received == 1 and reader.rejected == 0
+        finally:
+            reader.close()
+    finally:
+        os.close(master)
+        os.close(slave)
+

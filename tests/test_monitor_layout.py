@@ -51,7 +51,7 @@ async def test_arrows_select_d_deletes_the_row_seen_and_the_pane_shows_it_whole(
         assert app.query_one(TabbedContent).active == "watch"
         assert app.watchlist.names == WATCH
         table = app.query_one("#watch-table", DataTable)
-        assert app.focused is table  # ↑/↓ work at once, no Tab needed
+        await until(pilot, lambda: app.focused is table)  # ↑/↓ work at once, no Tab needed
         await pilot.press("down", "down")
         assert table.cursor_row == 2
         # the pane below shows the selected struct whole at 80 columns
@@ -67,7 +67,7 @@ async def test_arrows_select_d_deletes_the_row_seen_and_the_pane_shows_it_whole(
         await pilot.press("up", "d")
         assert app.watchlist.names == ["MYAXIS", "MYINT"]
         await pilot.press("1", "3")  # back to the list: focus follows
-        assert app.focused is table
+        await until(pilot, lambda: app.focused is table)
 
 
 async def test_the_layout_fills_80x24_and_120x40(emulator_factory: Any, tmp_path: Path) -> None:

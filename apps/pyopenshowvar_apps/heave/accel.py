@@ -120,6 +120,9 @@ class AccelReader:
         self.received = 0
         self.rejected = 0
         self._buffer = bytearray()
+        #: False from :meth:`open` until the first line end: bytes before it are the tail of a
+        #: line the board sent before we listened, not a line of its own
+        self._synced = True
         self._serial: Any = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._changed = asyncio.Event()
@@ -132,6 +135,12 @@ class AccelReader:
             self._serial = serial.Serial(self.port, self.baudrate, timeout=0)
         except (serial.SerialException, OSError) as exc:
             raise ConnectionError(f"accelerometer {self.port}: {exc}") from exc
+        # What the port buffered before we opened it is stale (old samples) and may begin or
+        # end in the middle of a line, like what arrives at once: both are dropped, not
+        # counted as rejected lines.
+        self._serial.reset_input_buffer()
+        self._buffer.clear()
+        self._synced = False
         self._loop = asyncio.get_running_loop()
         self._loop.add_reader(self._serial.fileno(), self._on_readable)
         try:
@@ -167,6 +176,11 @@ class AccelReader:
 
     def feed(self, chunk: bytes, now: float) -> None:
         """Take received bytes: complete lines update :attr:`latest`; bounded buffering."""
+        if not self._synced:
+            head, newline, chunk = chunk.partition(b"\n")
+            if not newline:  # still inside the first, partial line
+                return
+            self._synced = True
         self._buffer += chunk
         *lines, rest = bytes(self._buffer).split(b"\n")
         if len(rest) > MAX_LINE:
