@@ -249,4 +249,3 @@ async def test_the_reader_drops_what_came_before_it_listened_and_a_torn_first_li
     finally:
         os.close(master)
         os.close(slave)
-

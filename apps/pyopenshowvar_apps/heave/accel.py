@@ -177,7 +177,7 @@ class AccelReader:
     def feed(self, chunk: bytes, now: float) -> None:
         """Take received bytes: complete lines update :attr:`latest`; bounded buffering."""
         if not self._synced:
-            head, newline, chunk = chunk.partition(b"\n")
+            _torn, newline, chunk = chunk.partition(b"\n")
             if not newline:  # still inside the first, partial line
                 return
             self._synced = True
