@@ -397,20 +397,26 @@ async def test_silent_page_is_stopped_after_the_hold_timeout(cell: Factory) -> N
     me = c.pages[0]
     dog = asyncio.create_task(c.jog.run())
     loop = asyncio.get_running_loop()
+
+    async def stopped() -> bool:
+        return c.jog.jog is None
+
     try:
-        assert await c.jog.press(me, 1, A1_UP) is None
-        pressed = loop.time()
-
-        async def stopped() -> bool:
-            return c.jog.jog is None
-
-        await wait_until(stopped, timeout=5, interval=0.002)
-        assert 0.55 <= loop.time() - pressed < 0.55 + 0.4  # checked every 10 ms
-        assert c.jog.last_stop is not None
-        assert c.jog.last_stop[0] == "no keep-alive from the page for 550 ms"
+        for press in range(1, 4):  # a loaded machine may hold the loop: tried up to 3 times
+            pressed = loop.time()
+            assert await c.jog.press(me, press, A1_UP) is None
+            await wait_until(stopped, timeout=5, interval=0.002)
+            took = loop.time() - pressed
+            assert took >= 0.55
+            assert c.jog.last_stop is not None
+            assert c.jog.last_stop[0] == "no keep-alive from the page for 550 ms"
+            if took < 0.55 + 0.4:  # the watchdog looks every 10 ms
+                break
+        else:
+            pytest.fail(f"the silent jog was stopped only after {took:.2f} s")
         await idle(c)
         c.jog.hold_timeout = HOLD_TIMEOUT  # the real 100 ms
-        assert await c.jog.press(me, 2, A1_UP) is None
+        assert await c.jog.press(me, 9, A1_UP) is None
         await wait_until(stopped, timeout=5)
         assert c.jog.last_stop[0] == "no keep-alive from the page for 100 ms"
         assert await c.kvp.read("JOG_MODE") == "0"
