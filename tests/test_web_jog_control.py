@@ -23,8 +23,9 @@ from pyopenshowvar_apps.web.runner import KRL_DIR
 
 from kukavarproxy_emu import Emulator, EmulatorConfig
 from kukavarproxy_emu.faults import Fault
+from kukavarproxy_emu.store import VariableStore
 from kukavarproxy_emu.testing import wait_until
-from pyopenshowvar import Client, Struct
+from pyopenshowvar import Client, E6Axis, Struct
 from pyopenshowvar.kinematics import KR6R900SIXX, inverse, pose_to_matrix
 
 A1_UP = JogRequest("axis", "A1", 1, None, 100.0)
@@ -74,7 +75,8 @@ async def cell() -> AsyncIterator[Factory]:
 
     async def make(
         *, softp: dict[int, float] | None = None, softn: dict[int, float] | None = None,
-        system: dict[str, str] | None = None, auto_reconnect: bool = True, **kw: Any,
+        system: dict[str, str] | None = None, axes: E6Axis | None = None,
+        auto_reconnect: bool = True, **kw: Any,
     ) -> Cell:  # fmt: skip
         emu = Emulator(
             EmulatorConfig(
@@ -86,6 +88,8 @@ async def cell() -> AsyncIterator[Factory]:
                 config_files=(KRL_DIR / "kvp_jog_config.dat",),
             )
         )
+        if axes is not None:  # where the arm stands when the robot starts
+            emu.store.set_system("$AXIS_ACT", axes)
         await emu.start()
         clients: list[Client] = []
         made.append((emu, clients))
@@ -677,3 +681,49 @@ async def test_cartesian_jog_out_of_reach_is_refused(cell: Factory) -> None:
     refused = await c.jog.press(c.pages[0], 1, JogRequest("tool", "B", 1, None, 100.0))
     assert refused == "B +: out of reach or a singularity ahead"
     assert await c.kvp.read("JOG_MODE") == "0"
+
+
+async def test_the_solution_nearest_the_arm_is_the_one_checked(cell: Factory) -> None:
+    """A wrist turned far (A4 100, A6 -100) is nearer the other wrist solution for HOME: the
+    pose ahead must be solved nearest the axes now, or a small base move would look like a
+    180 deg swing of A4."""
+    c = await cell(axes=E6Axis(a1=0.0, a2=-90.0, a3=90.0, a4=100.0, a5=10.0, a6=-100.0))
+    dog = await c.watchdog()
+    try:  # a tiny step: the robot publishes its pose for where it stands
+        assert await c.jog.press(c.pages[1], 1, JogRequest("axis", "A1", 1, 0.1, 100.0)) is None
+
+        async def done() -> bool:
+            return c.jog.jog is None
+
+        await wait_until(done, timeout=5)
+    finally:
+        dog.cancel()
+    await idle(c)
+    assert await c.jog.press(c.pages[0], 1, JogRequest("base", "X", 1, None, 100.0)) is None
+    assert await c.kvp.read("JOG_MODE") == "2"
+    await c.jog.release(c.pages[0])
+
+
+@pytest.mark.parametrize("missing", ["$POS_ACT", "$AXIS_ACT"])
+async def test_a_position_the_robot_does_not_give_means_no_jog(cell: Factory, missing: str) -> None:
+    """A controller without $POS_ACT (or $AXIS_ACT): no jog, and no crash. The pad's
+    controller talks to a robot-less emulator that has the jog globals and only the other
+    of the two; the link (whose program state allows jogging) is the real cell's."""
+    c = await cell()
+    store = VariableStore(system=False, default_config=False)
+    store.declare("JOG_COUNT", "INT", init="0")
+    if missing == "$POS_ACT":
+        store.declare("$AXIS_ACT", "E6AXIS", init="{A1 0, A2 -90, A3 90, A4 0, A5 10, A6 0}")
+    else:
+        store.declare("$POS_ACT", "E6POS", init="{X 500, Y 0, Z 800, A 0, B 90, C 0}")
+    config = EmulatorConfig(port=0, latency="none", discovery=False, robot=False)
+    async with (
+        Emulator(config, store=store) as odd,
+        Client("127.0.0.1", odd.port, timeout=2.0) as client,
+    ):
+        jog = JogController(client, c.link)
+        refused = await jog.press(c.pages[0], 1, JogRequest("base", "X", 1, None, 100.0))
+        assert refused == "X +: out of reach or a singularity ahead"
+        if missing == "$AXIS_ACT":
+            assert await jog.press(c.pages[0], 2, A1_UP) == "software limit +A1 ahead"
+        assert jog.jog is None
