@@ -615,21 +615,25 @@ async def test_cartesian_press_needs_the_pose_ahead_within_the_limits(
     assert await c.kvp.read("JOG_MODE") == str(2 if req.frame == "base" else 3)
     await jog.release(c.pages[0])
     await idle(c)
-    # the axis that moves most, its limit between 7 and 8 increments ahead
+    # the axis that turns up most, then the one that turns down most: its limit between 7 and
+    # 8 increments ahead (the others wide), each limit refuses the jog on its own
     q, q8 = await ahead(c, req, CREDIT + 3)
     _, q7 = await ahead(c, req, CREDIT + 2)
-    i = int(np.argmax(np.abs(q8 - q)))
-    lo, hi = np.minimum(q, q8) - 0.5 - 1e-3, np.maximum(q, q8) + 0.5 + 1e-3
-    middle = (q7[i] + q8[i]) / 2
-    if q8[i] > q[i]:
-        hi[i] = middle + 0.5
-    else:
-        lo[i] = middle - 0.5
-    jog = await pad_with_limits(c, lo, hi)
-    refused = await jog.press(c.pages[0], 2, req)
-    sign = "+" if req.direction > 0 else "-"
-    assert refused == f"{req.key} {sign}: out of reach or a singularity ahead"
-    assert await c.kvp.read("JOG_MODE") == "0"
+    moves = q8 - q
+    for press, i in enumerate((int(np.argmax(moves)), int(np.argmin(moves))), start=2):
+        if abs(moves[i]) < 0.01:
+            continue  # no axis turns that way noticeably
+        lo, hi = np.minimum(q, q8) - 0.5 - 1e-3, np.maximum(q, q8) + 0.5 + 1e-3
+        middle = (q7[i] + q8[i]) / 2
+        if moves[i] > 0:
+            hi[i] = middle + 0.5
+        else:
+            lo[i] = middle - 0.5
+        jog = await pad_with_limits(c, lo, hi)
+        refused = await jog.press(c.pages[0], press, req)
+        sign = "+" if req.direction > 0 else "-"
+        assert refused == f"{req.key} {sign}: out of reach or a singularity ahead", i
+        assert await c.kvp.read("JOG_MODE") == "0"
 
 
 async def test_cartesian_step_is_checked_whole(cell: Factory) -> None:
