@@ -224,6 +224,10 @@ async def test_refused_without_the_token_or_from_another_origin(
     assert info.value.response.status_code == 403
     why = "wrong origin" if "Origin" in headers else "token missing or wrong"
     assert f"refused a WebSocket from 127.0.0.1: {why}" in _warnings(caplog)
+    # the log is rate-limited per address: another address is logged too
+    with pytest.raises(websockets.exceptions.InvalidStatus):
+        await page(web, token, additional_headers=headers, local_addr=("127.0.0.2", 0))
+    assert f"refused a WebSocket from 127.0.0.2: {why}" in _warnings(caplog)
     assert not web.app.state.pages
     ws = await page(web, TOKEN, additional_headers={"Origin": f"http://127.0.0.1:{web.port}"})
     await ws.close()
@@ -307,6 +311,15 @@ async def test_a_message_a_page_should_not_send_gets_an_error(
     assert await answer(ws, {"t": "read", "id": 2, "name": "MYINT"}) == {
         "t": "result", "id": 2, "name": "MYINT", "text": "0",
     }  # fmt: skip  # and the page is served on
+    await ws.close()
+
+
+async def test_an_error_message_is_cut_to_200_characters(rig: Rig) -> None:
+    web = await rig()
+    ws = await page(web)
+    got = await answer(ws, {"t": "read", "id": 1, "name": "\x01" * 100})  # repr: 4 each
+    assert got["t"] == "error" and len(got["message"]) == 200
+    assert got["message"].startswith("bad variable name '\\x01\\x01")
     await ws.close()
 
 
