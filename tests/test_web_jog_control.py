@@ -131,6 +131,11 @@ async def cell() -> AsyncIterator[Factory]:
         await emu.close()
 
 
+def requests(c: Cell) -> int:
+    """Requests the emulator has had on the controller's connection (the third)."""
+    return next(i.received for i in c.emu.connections() if i.index == 3)
+
+
 async def idle(c: Cell) -> None:
     async def program_idle() -> bool:
         return await c.kvp.read("JOG_MODE") == "0" and not c.emu.robot.kernel.moving  # type: ignore[union-attr]
@@ -374,21 +379,60 @@ async def test_held_jog_moves_on_and_stops_before_the_limit(cell: Factory) -> No
 
 
 async def test_step_ends_by_itself(cell: Factory) -> None:
+    """Two steps in a row (the second starts from a count that is not 0): each ends by itself
+    after exactly its increments, more than one credit's worth."""
     c = await cell()
     me = c.pages[0]
     dog = await c.watchdog()
+
+    async def done() -> bool:
+        return c.jog.jog is None
+
     try:
-        assert await c.jog.press(me, 1, JogRequest("axis", "A6", -1, 1.0, 100.0)) is None
-        start = c.jog.jog.start  # type: ignore[union-attr]
+        for press in (1, 2):
+            step = JogRequest("axis", "A6", -1, 10.0, 100.0)  # 12 increments at 45 deg/s
+            assert await c.jog.press(me, press, step) is None
+            start = c.jog.jog.start  # type: ignore[union-attr]
+            await wait_until(done, timeout=5)
+            assert c.jog.last_stop is not None and c.jog.last_stop[0] == "step done"
+            await idle(c)
+            assert await c.number("JOG_COUNT") == start + 12
+            a6 = (await c.kvp.read_joint_angles())[5]
+            assert a6 == pytest.approx(-10.0 * press, abs=1e-4)
+    finally:
+        dog.cancel()
 
-        async def done() -> bool:
-            return c.jog.jog is None
 
-        await wait_until(done, timeout=5)
-        assert c.jog.last_stop is not None and c.jog.last_stop[0] == "step done"
-        await idle(c)
-        assert await c.number("JOG_COUNT") == start + 2  # 1 deg at 45 deg/s: 2 increments
-        assert (await c.kvp.read_joint_angles())[5] == pytest.approx(-1.0, abs=1e-6)
+@pytest.mark.parametrize("failing", [False, True], ids=["step done", "read failed"])
+async def test_a_stale_top_up_never_ends_another_pages_jog(cell: Factory, failing: bool) -> None:
+    """A top-up reads the robot, and the page releases and another page presses while the
+    answer is on its way (the controller's next reply held back 0.3 s): what the stale top-up
+    finds (its step done, or its connection failed) ends no jog but its own page's."""
+    c = await cell()
+    me, other = c.pages
+    assert await c.jog.press(me, 1, JogRequest("axis", "A6", -1, 1.0, 100.0)) is None
+    start = c.jog.jog.start  # type: ignore[union-attr]
+
+    async def step_run() -> bool:
+        return await c.number("JOG_COUNT") == start + 2
+
+    await wait_until(step_run, timeout=5)  # the step ran; no watchdog has noticed yet
+    info = next(i for i in c.emu.connections() if i.index == 3)
+    c.emu.faults.add(Fault("delay", nth=info.received + 1, connection=3, seconds=0.3))
+    if failing:
+        c.emu.faults.add(Fault("close", nth=info.received + 1, connection=3))
+    dog = await c.watchdog()
+    try:
+        await asyncio.sleep(0.05)  # the watchdog's first top-up is out: its reply held
+        release = asyncio.create_task(c.jog.release(me))
+        await asyncio.sleep(0)  # the release holds the controller first
+        theirs = JogRequest("axis", "A1", 1, None, 100.0)
+        assert await c.jog.press(other, 1, theirs) is None
+        await release
+        await asyncio.sleep(0.1)  # the stale top-up has come back
+        assert c.jog.jog is not None and c.jog.jog.owner is other, c.jog.last_stop
+        assert c.jog.last_stop is not None and c.jog.last_stop[0] == "released"
+        await c.jog.release(other)
     finally:
         dog.cancel()
 
@@ -444,10 +488,14 @@ async def test_top_ups_give_only_the_room_left(cell: Factory) -> None:
             (2, JogRequest("axis", "A1", 1, None, 100.0), CREDIT),
         ):
             assert await c.jog.press(me, press, req) is None
-            end = loop.time() + 0.3  # several top-ups (one every 40 ms)
+            sent = requests(c)
+            t0 = loop.time()
+            end = t0 + 0.3  # several top-ups (one every 40 ms)
             while loop.time() < end:
                 await c.jog.press(me, press, req)
                 await asyncio.sleep(0.02)
+            # each top-up is 3 reads and a write, never more often than every 40 ms
+            assert requests(c) - sent <= 4 * ((loop.time() - t0) / 0.04 + 2)
             assert c.jog.jog is not None, c.jog.last_stop
             count, until = await c.number("JOG_COUNT"), await c.number("JOG_UNTIL")
             assert until == count + ahead
