@@ -403,23 +403,28 @@ async def test_step_ends_by_itself(cell: Factory) -> None:
         dog.cancel()
 
 
-@pytest.mark.parametrize("failing", [False, True], ids=["step done", "read failed"])
-async def test_a_stale_top_up_never_ends_another_pages_jog(cell: Factory, failing: bool) -> None:
+@pytest.mark.parametrize("finds", ["step done", "read failed", "limit"])
+async def test_a_stale_top_up_never_ends_another_pages_jog(cell: Factory, finds: str) -> None:
     """A top-up reads the robot, and the page releases and another page presses while the
     answer is on its way (the controller's next reply held back 0.3 s): what the stale top-up
-    finds (its step done, or its connection failed) ends no jog but its own page's."""
-    c = await cell()
+    finds (its step done, its connection failed, no room left before the limit) ends no jog
+    but its own page's."""
+    c = await cell(softp={3: 90.0 + 0.5 + 4.01 * A3_INC})
     me, other = c.pages
-    assert await c.jog.press(me, 1, JogRequest("axis", "A6", -1, 1.0, 100.0)) is None
+    if finds == "limit":  # room for one increment beyond those in flight: it runs, no more
+        mine, ran = JogRequest("axis", "A3", 1, None, 100.0), 1
+    else:
+        mine, ran = JogRequest("axis", "A6", -1, 1.0, 100.0), 2
+    assert await c.jog.press(me, 1, mine) is None
     start = c.jog.jog.start  # type: ignore[union-attr]
 
-    async def step_run() -> bool:
-        return await c.number("JOG_COUNT") == start + 2
+    async def moved() -> bool:
+        return await c.number("JOG_COUNT") == start + ran and not c.emu.robot.kernel.moving  # type: ignore[union-attr]
 
-    await wait_until(step_run, timeout=5)  # the step ran; no watchdog has noticed yet
+    await wait_until(moved, timeout=5)  # it ran; no watchdog has noticed yet
     info = next(i for i in c.emu.connections() if i.index == 3)
     c.emu.faults.add(Fault("delay", nth=info.received + 1, connection=3, seconds=0.3))
-    if failing:
+    if finds == "read failed":
         c.emu.faults.add(Fault("close", nth=info.received + 1, connection=3))
     dog = await c.watchdog()
     try:
