@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from pyopenshowvar_apps.armpick import given_arm
 from pyopenshowvar_apps.web.jog import HOLD_TIMEOUT, JogController, advance_pose
 from pyopenshowvar_apps.web.jogplan import AXIS_SPEED, CREDIT, JogRequest, plan_jog
 from pyopenshowvar_apps.web.robotlink import RobotLink, axes_of, frame6
@@ -784,3 +785,40 @@ async def test_a_position_the_robot_does_not_give_means_no_jog(cell: Factory, mi
         if missing == "$AXIS_ACT":
             assert await jog.press(c.pages[0], 2, A1_UP) == "software limit +A1 ahead"
         assert jog.jog is None
+
+
+async def test_the_arm_jogged_is_the_one_given_else_the_links(cell: Factory) -> None:
+    """``model=`` (``kvp web --robot``) plans with that arm's accelerations."""
+    c = await cell()
+    assert c.jog.model is c.link.model
+    other = given_arm("kr10_r1100_2").model
+    jog = JogController(c.control, c.link, model=other)
+    assert jog.model is other
+    assert await jog.press(c.pages[0], 1, A1_UP) is None
+    assert await c.number("JOG_ACC") == plan_jog(A1_UP, other).acc[0]
+    assert plan_jog(A1_UP, other).acc[0] != plan_jog(A1_UP, c.link.model).acc[0]
+    await jog.release(c.pages[0])
+
+
+async def test_the_first_top_up_comes_a_top_up_period_after_the_press(cell: Factory) -> None:
+    """The press itself gave the credit: the watchdog reads the robot again only 40 ms later
+    (a loaded machine may stretch the look, so it is repeated until it lands inside 30 ms)."""
+    c = await cell()
+    me = c.pages[0]
+    dog = await c.watchdog()
+    loop = asyncio.get_running_loop()
+    try:
+        for press in range(1, 8):
+            t0 = loop.time()
+            assert await c.jog.press(me, press, A1_UP) is None
+            sent = requests(c)
+            await asyncio.sleep(0.015)  # the watchdog looks every 5 ms
+            if loop.time() - t0 < 0.03:
+                assert requests(c) == sent  # no top-up yet
+                break
+            await c.jog.release(me)
+        else:
+            pytest.skip("the machine never gave the loop 30 ms in time")
+        await c.jog.release(me)
+    finally:
+        dog.cancel()
