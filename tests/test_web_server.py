@@ -345,6 +345,9 @@ async def test_reads_writes_and_their_refusals(rig: Rig, caplog: pytest.LogCaptu
     )
     got = await answer(ws, {"t": "write", "id": 5, "name": "$OV_PRO", "value": "10"})
     assert got["error"].startswith("writing $OV_PRO can move the robot")
+    value = "{A1 " + "1" * 100
+    got = await answer(ws, {"t": "write", "id": 8, "name": "MYINT", "value": value})
+    assert got["message"].startswith(f"{value[:40]!r} is not a KRL literal: ")  # its start
     assert await answer(ws, {"t": "write", "id": 7, "name": "MYINT"}) == {
         "t": "error", "message": "'' is not a KRL literal: empty text '' is not a KRL value",
     }  # fmt: skip
