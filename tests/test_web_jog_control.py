@@ -62,6 +62,21 @@ class Cell:
     async def watchdog(self) -> asyncio.Task[None]:
         return asyncio.create_task(self.jog.run(0.005))
 
+    async def step(self, req: JogRequest) -> None:
+        """Run the step ``req`` (pressed by the second page) to its end, the arm still."""
+        dog = await self.watchdog()
+        try:
+            assert await self.jog.press(self.pages[1], 1, req) is None
+
+            async def done() -> bool:
+                return self.jog.jog is None
+
+            await wait_until(done, timeout=5)
+        finally:
+            dog.cancel()
+        self.jog.forget(self.pages[1])
+        await idle(self)
+
 
 Factory = Callable[..., Awaitable[Cell]]
 
@@ -604,17 +619,7 @@ async def cartesian_cell(cell: Factory, tool: str = TOOL, base: str = BASE) -> C
     """A cell with ``tool`` and ``base``, the arm out of HOME's wrist singularity (an A5 step
     of 10 degrees), standing still."""
     c = await cell(system={"$TOOL": tool, "$BASE": base})
-    dog = await c.watchdog()
-    try:
-        assert await c.jog.press(c.pages[1], 1, JogRequest("axis", "A5", 1, 10.0, 100.0)) is None
-
-        async def done() -> bool:
-            return c.jog.jog is None
-
-        await wait_until(done, timeout=5)
-    finally:
-        dog.cancel()
-    await idle(c)
+    await c.step(JogRequest("axis", "A5", 1, 10.0, 100.0))
     return c
 
 
@@ -746,17 +751,7 @@ async def test_the_solution_nearest_the_arm_is_the_one_checked(cell: Factory) ->
     pose ahead must be solved nearest the axes now, or a small base move would look like a
     180 deg swing of A4."""
     c = await cell(axes=E6Axis(a1=0.0, a2=-90.0, a3=90.0, a4=100.0, a5=10.0, a6=-100.0))
-    dog = await c.watchdog()
-    try:  # a tiny step: the robot publishes its pose for where it stands
-        assert await c.jog.press(c.pages[1], 1, JogRequest("axis", "A1", 1, 0.1, 100.0)) is None
-
-        async def done() -> bool:
-            return c.jog.jog is None
-
-        await wait_until(done, timeout=5)
-    finally:
-        dog.cancel()
-    await idle(c)
+    await c.step(JogRequest("axis", "A1", 1, 0.1, 100.0))  # the robot publishes its pose
     assert await c.jog.press(c.pages[0], 1, JogRequest("base", "X", 1, None, 100.0)) is None
     assert await c.kvp.read("JOG_MODE") == "2"
     await c.jog.release(c.pages[0])
