@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import socket
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
@@ -476,3 +477,19 @@ async def test_pages_that_left_leave_nothing_behind(rig: Rig) -> None:
 
     await wait_until(lambda: not senders(), timeout=5)
     assert web.jog._done == {}
+
+
+async def test_a_robot_that_is_not_there_is_a_state_too() -> None:
+    """The link's state while it connects (or after it lost the robot) has no values: a page
+    gets it, and stays connected and answered."""
+    with socket.socket() as free:  # a port nobody listens on
+        free.bind(("127.0.0.1", 0))
+        port = free.getsockname()[1]
+    async with WebServer("127.0.0.1", port, token=TOKEN, timeout=0.5) as web:
+        ws = await page(web)
+        got = await state(ws, lambda s: True)
+        assert got["link"]["connected"] is False and got["link"]["error"]
+        assert got["watch"] == {} and got["jog"]["active"] is False
+        reply = await answer(ws, {"t": "read", "id": 1, "name": "MYINT"})
+        assert reply["id"] == 1 and reply["error"]
+        await ws.close()
