@@ -4,7 +4,7 @@ No web server in between: each test drives a :class:`JogController` like the ser
 (``press``, ``release``, ``stop``, the ``run`` watchdog) over real TCP to an emulator running
 the shipped KVP_JOG program (ideal plant: the axes read back exactly), and checks what it wrote
 to the robot and what it says. The end-to-end jogs through the WebSocket are in
-tests/test_web_jog.py; these are the controller's rules one by one, each well under a second.
+tests/test_web_jog.py; these are the controller's rules one by one, each about a second at most.
 """
 
 from __future__ import annotations
