@@ -15,13 +15,14 @@ single asyncio thread; it has no locks.
 
 The name grammar and array addressing live in :mod:`kukavarproxy_emu.names`, the type rules
 (coercion, validation, struct merging) in :mod:`kukavarproxy_emu.values`; this module ties them
-to the declared variables and the read-text cache.
+to the declared variables and the read-text cache; lazy values (:meth:`~VariableStore.defer`)
+are in :mod:`kukavarproxy_emu.store_lazy`.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from functools import lru_cache, partial
 from importlib.metadata import PackageNotFoundError, version
 from typing import Protocol, cast
@@ -41,6 +42,7 @@ from pyopenshowvar.sysvars import system_variables
 
 from .default_config import load_default_config
 from .names import Var, VarPath, parse_name
+from .store_lazy import LazyValues
 from .values import CHAR_LEN, Range, Refused, check, check_ranges, coerce, parse_text, rebuild
 
 __all__ = ["Range", "UnknownVariable", "VariableStore", "WriteRefused"]
@@ -99,7 +101,7 @@ class _Producer(Protocol):
     def __call__(self, spec: TypeSpec, type_name: str) -> KrlValue: ...
 
 
-class VariableStore:
+class VariableStore(LazyValues):
     """KRL variables by name: typed values inside, KRC4 text at the edges.
 
     ``strict``: refuse REAL text for INT targets (a KRC converts ``50.0``) and raise on a bad
@@ -126,14 +128,10 @@ class VariableStore:
         # read() text per base name and path; dropped whenever the variable changes
         self._text: dict[str, dict[VarPath, str]] = {}
         self._system: set[str] = set()
-        # lazy values (see defer): the stale base names and the callback that fills them
-        # stale base name -> (its group, the fill that sets the whole group)
-        self._stale: dict[str, tuple[frozenset[str], Callable[[], None]]] = {}
         #: Changes of any variable so far, and per variable (base name): a KRL pass that read
         #: only unchanged variables and wrote nothing would do exactly the same again.
         self.mutations = 0
-        #: Of those, the marks of lazy values as stale (:meth:`defer`), not changes as such.
-        self.stale_marks = 0
+        self._init_lazy()  # lazy values (see defer)
         #: Called before every write from :meth:`write`, :meth:`write_words` and untrusted
         #: :meth:`set_system`: the simulated robot brings a coasting clock up to date first,
         #: so a change from outside its tick is acted on by the next regular tick.
@@ -488,53 +486,11 @@ class VariableStore:
             raise UnknownVariable(name)
         self._assign(name, lambda spec, type_name: value, bypass_read_only=True)
 
-    def defer(self, names: Iterable[str], fill: Callable[[], None]) -> None:
-        """Mark the variables ``names`` stale: the first :meth:`read` or :meth:`get` of any of
-        them calls ``fill()`` once, which sets them (e.g. with :meth:`set_system`).
-
-        The simulated robot computes its published readings this way only when someone
-        looks: a robot nobody reads costs no formatting. The names form a group filled
-        together; several groups may be stale at once (a reader of ``$AXIS_ACT`` does not pay
-        for the forward kinematics of ``$POS_ACT``). Deferring a name again replaces the
-        earlier, unfilled group it was in.
-        """
-        # a frozenset is taken as it is (the robot defers the same names every cycle)
-        group = (
-            names if isinstance(names, frozenset) else frozenset(n.strip().upper() for n in names)
-        )
-        entry = (group, fill)
-        stale = self._stale
-        self.stale_marks += len(group)
-        for name in group:
-            stale[name] = entry
-            self._bump(name)  # its value changes when it is filled
-
     @property
     def declared(self) -> Mapping[str, Var]:
         """The declarations by base name (the store's own mapping, not a copy: a compiled
         :class:`~.slot.Slot` checks ``declared.get(name) is var`` to know it is current)."""
         return self._vars
-
-    def fill_stale(self, base: str) -> None:
-        """Fill the lazy value ``base`` if it is stale (see :meth:`defer`); else nothing."""
-        if self._stale and base in self._stale:
-            self._refresh(base)
-
-    def _refresh(self, base: str | None = None) -> None:
-        """Fill the group of ``base`` (None: every stale group)."""
-        stale = self._stale
-        while stale:
-            key = base if base is not None else next(iter(stale))
-            entry = stale.get(key)
-            if entry is None:
-                return
-            group, fill = entry
-            for name in group:
-                if stale.get(name) is entry:
-                    del stale[name]
-            fill()
-            if base is not None:
-                return
 
     def names(self) -> list[str]:
         """All variable names, sorted (arrays without brackets), for tab completion."""
