@@ -132,6 +132,9 @@ class VariableStore(LazyValues):
         #: only unchanged variables and wrote nothing would do exactly the same again.
         self.mutations = 0
         self._init_lazy()  # lazy values (see defer)
+        #: Variables declared so far (declared anew included): a compiled path is current
+        #: while this has not moved.
+        self.declarations = 0
         #: Called before every write from :meth:`write`, :meth:`write_words` and untrusted
         #: :meth:`set_system`: the simulated robot brings a coasting clock up to date first,
         #: so a change from outside its tick is acted on by the next regular tick.
@@ -171,6 +174,7 @@ class VariableStore(LazyValues):
             raise ValueError(f"invalid variable name {name!r}")
         if key in self._vars and (not replace or key in self._system):
             raise ValueError(f"variable {key} is already declared")
+        self.fill_stale(key)  # a pending fill sets the old declaration, not the new one
         type_name = type_name.strip().upper()
         sized = CHAR_LEN.match(type_name)
         if sized is not None and not dims:  # "CHAR[32]" is the same as CHAR with dims (32,)
@@ -200,6 +204,7 @@ class VariableStore(LazyValues):
             var.elems = [var.elems[0]] * len(var.elems)  # one value for all: no per-element loop
         var.read_only = read_only
         self._vars[key] = var
+        self.declarations += 1
         self._text.pop(key, None)
         self._bump(key)
 
@@ -371,6 +376,8 @@ class VariableStore(LazyValues):
             self.on_write()
         path = parse_name(f"{name}[1]")
         var = self._vars.get(path.base) if path is not None else None
+        if var is not None:
+            self.fill_stale(var.name)  # a pending value first, then the words over it
         if var is None or not words or var.read_only or var.text_len or len(var.dims) != 1:
             return False  # every element refused (unknown, read-only, not a 1-D array, text)
         kind = var.spec.kind
@@ -442,6 +449,8 @@ class VariableStore(LazyValues):
         var = self._vars.get(path.base) if path is not None else None
         if path is None or var is None:
             raise UnknownVariable(name)
+        if self._stale and var.name in self._stale:
+            self._refresh(var.name)  # a pending value first, then this write over it
         if trusted and not path.index and not path.members:
             if var.is_array:
                 if not isinstance(value, list) or len(value) != len(var.elems):
@@ -495,6 +504,10 @@ class VariableStore(LazyValues):
     def names(self) -> list[str]:
         """All variable names, sorted (arrays without brackets), for tab completion."""
         return sorted({*self._vars, *self._info})
+
+    def is_system(self, base: str) -> bool:
+        """Whether ``base`` (upper-case, no index) is one of the controller's own variables."""
+        return base in self._system
 
     def declaration(self, base: str) -> Var | None:
         """The declared variable ``base`` (upper-case, no index): type, dimensions, flags.
@@ -559,6 +572,7 @@ class VariableStore(LazyValues):
             var = self._vars.get(path.base)
             if var is None:
                 raise Refused("read-only" if path.base in self._info else "unknown variable")
+            self.fill_stale(var.name)  # a pending value first, then this write over it
             if var.read_only and not bypass_read_only:
                 raise Refused("read-only")
             if var.is_array and path.index == ():
