@@ -204,14 +204,15 @@ class KrlSubmit:
         _set(self.store, "$PRO_NAME0[]", self.module.name[:24])
         _set(self.store, "$PRO_STATE0", KrlEnum("P_ACTIVE"))
 
-    def step(self) -> None:
-        """One interpolation cycle of the submit interpreter."""
+    def step(self, *, lazy: bool = True) -> None:
+        """One interpolation cycle of the submit interpreter; ``lazy``: its pass may run
+        lazily (:mod:`.lazy_pass`) if :attr:`lazy` allows it too."""
         self.light = False
         if not self.running:
             return
         self.interp.sim_time += self.ipo
         try:
-            if not self._lazy_pass():
+            if not (lazy and self.lazy and self._lazy_pass()):
                 self.interp.step()
         except KrlRuntimeError as exc:
             self._stop(exc.located(self.filename), "P_STOP")
@@ -233,7 +234,7 @@ class KrlSubmit:
             return False
         if at != self._lazy_loop:  # compiled once per LOOP the pass ends at
             self._lazy_loop = at
-            self._lazy = LazyPass.compile(self.interp, at) if self.lazy else None
+            self._lazy = LazyPass.compile(self.interp, at)
         return self._lazy is not None and self._lazy.run()
 
     def _stop(self, message: str, state: str) -> None:

@@ -8,7 +8,7 @@ kinematics) for them. A :class:`LazyPass` runs such a pass in two parts:
 * the **carried** statements, those the next pass reads (the counter), run now, as they would;
 * the **dead-if-followed** statements (the copies and ``CELL = CELL_W``: :mod:`.pass_flow`)
   do not run. The pass captures what they would read from outside the pass (a reading of
-  the resting plant: the frozen inputs it would be computed from, see
+  the plant: the frozen inputs it would be computed from, see
   :meth:`~..store.VariableStore.capture`; any other variable: its value) and marks the
   variables the pass writes stale (:meth:`~..store.VariableStore.defer`). The first read or
   write of any of them, by anyone (a KVP, C3 or kvp9 request, the robot program, the
@@ -308,7 +308,6 @@ class LazyPass:
         # the previous pass's deferred copies are dead now: the carried statements below do
         # not read them, and this pass's deferred copies overwrite them before anyone can
         waited = pending is not None and store.forget(pending)
-        self._counted = None
         try:
             # the LOOP's own statement count and the deferred copies, as the interpreter
             # counts them
@@ -319,7 +318,7 @@ class LazyPass:
             if waited:  # the SPS stops here: the previous pass stays as it would have
                 self.pending = store.defer(self.targets, self._materialize)
             raise
-        self._captured, self._seen = captured, self._seeing
+        self._captured, self._seen, self._counted = captured, self._seeing, None
         self.pending = store.defer(self.targets, self._materialize)
         return count
 

@@ -357,3 +357,17 @@ def test_a_copied_structure_keeps_its_members(tmp_path: Path) -> None:
     n = sps.module.name[1:]
     assert store.get(f"A{n}.X") == 3 and store.get(f"A{n}.Y") == 0
     assert store.get(f"B{n}.X") == 4 and store.get(f"B{n}.Y") == 5
+
+
+async def test_with_a_latency_profile_passes_run_as_before(tmp_path: Path) -> None:
+    """Replies first: a reply computed at its deadline must not make a waiting pass (the
+    readings, the copies), so with a latency profile every pass runs in its tick."""
+    dat, sub = CELL.write_krl(tmp_path)
+    cfg = replace(CFG, config_files=(dat,), sps=str(sub), latency="kvp")
+    async with Emulator(cfg) as emu:
+        robot = emu.robot
+        assert robot is not None and robot.sps is not None
+        ticks = robot.clock.ticks
+        await wait_until(lambda: robot.clock.ticks >= ticks + 10)
+        assert not emu.store.is_stale("CELL") and not emu.store.is_stale("CELL_W")
+        assert robot.sps._lazy is None or robot.sps._lazy.pending is None
