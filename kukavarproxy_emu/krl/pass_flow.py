@@ -39,7 +39,7 @@ def overlaps(a: Path, b: Path) -> bool:
 
 
 def _covers(kill: Path, path: Path) -> bool:
-    return len(kill) <= len(path) and path[: len(kill)] == kill
+    return path[: len(kill)] == kill  # a shorter path is never equal to a longer kill
 
 
 @dataclass(frozen=True, slots=True)

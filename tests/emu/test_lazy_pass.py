@@ -165,6 +165,24 @@ def test_a_lazy_pass_shows_what_an_eager_one_shows(
     assert lazy.sps.message == eager.sps.message
 
 
+def test_what_a_pass_defers(pair: tuple[Robot, Robot], tmp_path: Path) -> None:
+    """The snapshot's shape: the counter runs, the copies wait. A write on one way of an IF
+    kills nothing: the pass publishing W keeps that IF running."""
+    lazy, eager = pair
+    for body, carried, deferred in (
+        ([STATEMENTS[0], "{W}.A = $AXIS_ACT", "{W}.R = {Y}", "{G} = {W}"], 1, 3),
+        (["IF {Y} > 0.5 THEN\n{W}.R = 1.0\nENDIF", "{G} = {W}"], 1, 1),
+    ):
+        _install(lazy, tmp_path, body, next(_ids))
+        assert lazy.sps is not None
+        for _ in range(2):
+            lazy.tick()
+            eager.tick()  # the pair stays in lockstep (same plant cycle, same noise)
+        lazy_pass = lazy.sps._lazy
+        assert lazy_pass is not None, body
+        assert (len(lazy_pass.carried), len(lazy_pass.deferred)) == (carried, deferred)
+
+
 # --- the snapshot -----------------------------------------------------------------------------
 def _snapshot_robots(tmp_path: Path, program: str = "none") -> tuple[Robot, Robot]:
     dat, sub = CELL.write_krl(tmp_path)
