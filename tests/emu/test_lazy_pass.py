@@ -123,7 +123,7 @@ def _actions(names: dict[str, str]) -> st.SearchStrategy[list[tuple[str, str, st
 
 
 @settings(
-    max_examples=40,
+    max_examples=30,
     deadline=None,
     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
 )
