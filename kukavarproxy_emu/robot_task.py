@@ -162,7 +162,9 @@ class Robot:
             sps_changes = 0
             if self.sps is not None:
                 before = store.mutations - store.stale_marks
-                self.sps.step()
+                # not lazily with a latency profile (a clock gate): making a waiting pass
+                # when a reply reads it would make that reply late (see _light_sps)
+                self.sps.step(lazy=self.clock.gate is None)
                 if self._light_sps():  # its writes do not keep the clock awake (see below)
                     sps_changes = store.mutations - store.stale_marks - before
             self.kernel.tick()

@@ -5,7 +5,7 @@ declaration, the element and the member types, and (for a typed value) converts 
 again. That is right for requests from the network; the KRL interpreter's compiled statement
 plans (:mod:`.krl.plan`) instead touch the same few paths every cycle (an SPS snapshot copies
 a few dozen of them each 12 ms). A :class:`Slot` resolves its path once and then applies the
-store's own rules to it: lazy values are filled before a read, a value put at a member path
+store's own rules to it: lazy values are filled before a read or a write, a value put at a member path
 merges as KRL does (:func:`~.values.rebuild`), declared limits are checked, the read cache and
 the change counters move exactly as :meth:`VariableStore.set_system` moves them.
 
@@ -73,10 +73,24 @@ class Slot:
         """Put ``value`` (already of the slot's kind, as KRL converts: see
         :func:`~.krl.runtime.convert`) there; ``valid``: it is a value of the slot's very type
         read from the store, not checked again. Raises :class:`Refused` (nothing changed)."""
-        var = self.var
+        var, store = self.var, self.store
+        store.fill_stale(var.name)  # a pending value first, then this write over it
         if not valid:
-            check(value, *self.chain[-1], self.store.registry)
-        new = rebuild(var.elems[self.index], self.chain, self.members, value)
+            check(value, *self.chain[-1], store.registry)
+        old = var.elems[self.index]
+        members = self.members
+        if (
+            len(members) == 1
+            and type(old) is Struct
+            and members[0] in old._members
+            and not isinstance(value, Struct)
+        ):
+            # one member of a plain STRUC replaced: a copy of the members with the new value,
+            # in their order (what rebuild() makes, without merging or re-sorting): values
+            # are shared, never changed, so a variable copied from this one keeps its own
+            new: KrlValue = Struct._new(old._type_name, {**old._members, members[0]: value})
+        else:
+            new = rebuild(old, self.chain, members, value)
         check_ranges(var.ranges, var.name, new)
         var.elems[self.index] = new
-        self.store.changed(var, self.index)
+        store.changed(var, self.index)

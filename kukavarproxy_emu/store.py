@@ -15,13 +15,14 @@ single asyncio thread; it has no locks.
 
 The name grammar and array addressing live in :mod:`kukavarproxy_emu.names`, the type rules
 (coercion, validation, struct merging) in :mod:`kukavarproxy_emu.values`; this module ties them
-to the declared variables and the read-text cache.
+to the declared variables and the read-text cache; lazy values (:meth:`~VariableStore.defer`)
+are in :mod:`kukavarproxy_emu.store_lazy`.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from functools import lru_cache, partial
 from importlib.metadata import PackageNotFoundError, version
 from typing import Protocol, cast
@@ -41,6 +42,7 @@ from pyopenshowvar.sysvars import system_variables
 
 from .default_config import load_default_config
 from .names import Var, VarPath, parse_name
+from .store_lazy import LazyValues
 from .values import CHAR_LEN, Range, Refused, check, check_ranges, coerce, parse_text, rebuild
 
 __all__ = ["Range", "UnknownVariable", "VariableStore", "WriteRefused"]
@@ -99,7 +101,7 @@ class _Producer(Protocol):
     def __call__(self, spec: TypeSpec, type_name: str) -> KrlValue: ...
 
 
-class VariableStore:
+class VariableStore(LazyValues):
     """KRL variables by name: typed values inside, KRC4 text at the edges.
 
     ``strict``: refuse REAL text for INT targets (a KRC converts ``50.0``) and raise on a bad
@@ -126,14 +128,13 @@ class VariableStore:
         # read() text per base name and path; dropped whenever the variable changes
         self._text: dict[str, dict[VarPath, str]] = {}
         self._system: set[str] = set()
-        # lazy values (see defer): the stale base names and the callback that fills them
-        # stale base name -> (its group, the fill that sets the whole group)
-        self._stale: dict[str, tuple[frozenset[str], Callable[[], None]]] = {}
         #: Changes of any variable so far, and per variable (base name): a KRL pass that read
         #: only unchanged variables and wrote nothing would do exactly the same again.
         self.mutations = 0
-        #: Of those, the marks of lazy values as stale (:meth:`defer`), not changes as such.
-        self.stale_marks = 0
+        self._init_lazy()  # lazy values (see defer)
+        #: Variables declared so far (declared anew included): a compiled path is current
+        #: while this has not moved.
+        self.declarations = 0
         #: Called before every write from :meth:`write`, :meth:`write_words` and untrusted
         #: :meth:`set_system`: the simulated robot brings a coasting clock up to date first,
         #: so a change from outside its tick is acted on by the next regular tick.
@@ -173,6 +174,7 @@ class VariableStore:
             raise ValueError(f"invalid variable name {name!r}")
         if key in self._vars and (not replace or key in self._system):
             raise ValueError(f"variable {key} is already declared")
+        self.fill_stale(key)  # a pending fill sets the old declaration, not the new one
         type_name = type_name.strip().upper()
         sized = CHAR_LEN.match(type_name)
         if sized is not None and not dims:  # "CHAR[32]" is the same as CHAR with dims (32,)
@@ -202,6 +204,7 @@ class VariableStore:
             var.elems = [var.elems[0]] * len(var.elems)  # one value for all: no per-element loop
         var.read_only = read_only
         self._vars[key] = var
+        self.declarations += 1
         self._text.pop(key, None)
         self._bump(key)
 
@@ -373,6 +376,8 @@ class VariableStore:
             self.on_write()
         path = parse_name(f"{name}[1]")
         var = self._vars.get(path.base) if path is not None else None
+        if var is not None:
+            self.fill_stale(var.name)  # a pending value first, then the words over it
         if var is None or not words or var.read_only or var.text_len or len(var.dims) != 1:
             return False  # every element refused (unknown, read-only, not a 1-D array, text)
         kind = var.spec.kind
@@ -444,6 +449,8 @@ class VariableStore:
         var = self._vars.get(path.base) if path is not None else None
         if path is None or var is None:
             raise UnknownVariable(name)
+        if self._stale and var.name in self._stale:
+            self._refresh(var.name)  # a pending value first, then this write over it
         if trusted and not path.index and not path.members:
             if var.is_array:
                 if not isinstance(value, list) or len(value) != len(var.elems):
@@ -488,57 +495,19 @@ class VariableStore:
             raise UnknownVariable(name)
         self._assign(name, lambda spec, type_name: value, bypass_read_only=True)
 
-    def defer(self, names: Iterable[str], fill: Callable[[], None]) -> None:
-        """Mark the variables ``names`` stale: the first :meth:`read` or :meth:`get` of any of
-        them calls ``fill()`` once, which sets them (e.g. with :meth:`set_system`).
-
-        The simulated robot computes its published readings this way only when someone
-        looks: a robot nobody reads costs no formatting. The names form a group filled
-        together; several groups may be stale at once (a reader of ``$AXIS_ACT`` does not pay
-        for the forward kinematics of ``$POS_ACT``). Deferring a name again replaces the
-        earlier, unfilled group it was in.
-        """
-        # a frozenset is taken as it is (the robot defers the same names every cycle)
-        group = (
-            names if isinstance(names, frozenset) else frozenset(n.strip().upper() for n in names)
-        )
-        entry = (group, fill)
-        stale = self._stale
-        self.stale_marks += len(group)
-        for name in group:
-            stale[name] = entry
-            self._bump(name)  # its value changes when it is filled
-
     @property
     def declared(self) -> Mapping[str, Var]:
         """The declarations by base name (the store's own mapping, not a copy: a compiled
         :class:`~.slot.Slot` checks ``declared.get(name) is var`` to know it is current)."""
         return self._vars
 
-    def fill_stale(self, base: str) -> None:
-        """Fill the lazy value ``base`` if it is stale (see :meth:`defer`); else nothing."""
-        if self._stale and base in self._stale:
-            self._refresh(base)
-
-    def _refresh(self, base: str | None = None) -> None:
-        """Fill the group of ``base`` (None: every stale group)."""
-        stale = self._stale
-        while stale:
-            key = base if base is not None else next(iter(stale))
-            entry = stale.get(key)
-            if entry is None:
-                return
-            group, fill = entry
-            for name in group:
-                if stale.get(name) is entry:
-                    del stale[name]
-            fill()
-            if base is not None:
-                return
-
     def names(self) -> list[str]:
         """All variable names, sorted (arrays without brackets), for tab completion."""
         return sorted({*self._vars, *self._info})
+
+    def is_system(self, base: str) -> bool:
+        """Whether ``base`` (upper-case, no index) is one of the controller's own variables."""
+        return base in self._system
 
     def declaration(self, base: str) -> Var | None:
         """The declared variable ``base`` (upper-case, no index): type, dimensions, flags.
@@ -603,6 +572,7 @@ class VariableStore:
             var = self._vars.get(path.base)
             if var is None:
                 raise Refused("read-only" if path.base in self._info else "unknown variable")
+            self.fill_stale(var.name)  # a pending value first, then this write over it
             if var.read_only and not bypass_read_only:
                 raise Refused("read-only")
             if var.is_array and path.index == ():

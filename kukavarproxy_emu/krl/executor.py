@@ -31,6 +31,7 @@ from ..motion.programs import Program
 from ..store import VariableStore
 from . import ast
 from .interp import DEFAULT_BUDGET, Interpreter
+from .lazy_pass import LazyPass
 from .parser import KrlSyntaxError, parse_src, read_src
 from .runtime import KrlRuntimeError
 
@@ -190,6 +191,10 @@ class KrlSubmit:
         self.message = ""
         #: The last cycle was one whole, short pass (see :attr:`light`).
         self.light = False
+        #: Run passes lazily where nothing can tell (:mod:`.lazy_pass`); False: always eagerly.
+        self.lazy = True
+        self._lazy: LazyPass | None = None
+        self._lazy_loop: int | None = None
 
     def start(self) -> None:
         """(Re)start the submit program from its first statement."""
@@ -199,14 +204,16 @@ class KrlSubmit:
         _set(self.store, "$PRO_NAME0[]", self.module.name[:24])
         _set(self.store, "$PRO_STATE0", KrlEnum("P_ACTIVE"))
 
-    def step(self) -> None:
-        """One interpolation cycle of the submit interpreter."""
+    def step(self, *, lazy: bool = True) -> None:
+        """One interpolation cycle of the submit interpreter; ``lazy``: its pass may run
+        lazily (:mod:`.lazy_pass`) if :attr:`lazy` allows it too."""
         self.light = False
         if not self.running:
             return
         self.interp.sim_time += self.ipo
         try:
-            self.interp.step()
+            if not (lazy and self.lazy and self._lazy_pass()):
+                self.interp.step()
         except KrlRuntimeError as exc:
             self._stop(exc.located(self.filename), "P_STOP")
             return
@@ -219,6 +226,16 @@ class KrlSubmit:
             return
         interp = self.interp
         self.light = interp.whole_pass and interp.count <= LIGHT_PASS
+
+    def _lazy_pass(self) -> bool:
+        """Run this cycle's pass lazily (:mod:`.lazy_pass`) if it may be; False otherwise."""
+        at = self.interp._at_pass
+        if at is None:
+            return False
+        if at != self._lazy_loop:  # compiled once per LOOP the pass ends at
+            self._lazy_loop = at
+            self._lazy = LazyPass.compile(self.interp, at)
+        return self._lazy is not None and self._lazy.run()
 
     def _stop(self, message: str, state: str) -> None:
         self.running = False

@@ -103,12 +103,15 @@ class AssignPlan:
             source is not None and declared.get(source.var.name) is not source.var
         )
 
-    def run(self) -> bool:
-        """Do the assignment; False when the plan does not apply now (nothing was done)."""
+    def run(self, *, checked: bool = False) -> bool:
+        """Do the assignment; False when the plan does not apply now (nothing was done).
+        ``checked``: the caller knows the paths are current and no local shadows them."""
         ev, target, source = self.ev, self.target, self.source
-        if self.stale():
+        if checked:
+            pass
+        elif self.stale():
             return False  # a variable was declared anew
-        if ev.frames:  # the routine running now may have a local of the same name
+        elif ev.frames:  # the routine running now may have a local of the same name
             local = ev.frames[-1].names
             if target.var.name in local or (source is not None and source.var.name in local):
                 return False
@@ -129,25 +132,30 @@ class AssignPlan:
             if source is not None:
                 reads.add((self.store, source.var.name))
             reads.add((self.store, target.var.name))
-        copied = value  # a structure read from the store, unless converted below
-        value = convert(
+        self.put(value, copied=source is not None and self.op is None)
+        return True
+
+    def put(self, value: KrlValue, *, copied: bool) -> None:
+        """The assignment's second half: convert ``value`` to the target's type and store it
+        (not written when the target holds it already); ``copied``: ``value`` was read as it
+        is from the store (a structure of the target's very type is not checked again)."""
+        target = self.target
+        converted = convert(
             value, target.chain[-1][0], target.type_name, self.store.registry, self.stmt
         )
-        if target.get() == value:
-            return True  # nothing observable changes
+        if target.get() == converted:
+            return  # nothing observable changes
         valid = (
-            source is not None
-            and self.op is None
-            and value is copied
-            and isinstance(value, Struct)
-            and value.type_name == target.type_name
+            copied
+            and converted is value
+            and isinstance(converted, Struct)
+            and converted.type_name == target.type_name
         )
         try:
-            target.set(value, valid=valid)
+            target.set(converted, valid=valid)
         except Refused as exc:
             text = render(self.stmt.target)
-            raise KrlRuntimeError(f"{text} = {_short(value)}: {exc}", self.stmt) from None
-        return True
+            raise KrlRuntimeError(f"{text} = {_short(converted)}: {exc}", self.stmt) from None
 
 
 def _slot(store: VariableStore, expr: ast.Expr) -> Slot | None:

@@ -294,6 +294,8 @@ class DynamicPlant(Sensors):
     def step(self, q_set_deg: FloatArray) -> None:
         """One IPO cycle towards the set-point ``q_set_deg`` (A1..A6, deg)."""
         changed = self._inputs_changed()
+        if changed:
+            self._idle_speed = None  # the model or its inputs changed: the TCP speed too
         if self.braked or (self.resting and not changed and q_set_deg is self._q_seen):
             # the brakes hold the arm; or the kernel hands over the very same array while it
             # stands still: at rest
@@ -307,6 +309,7 @@ class DynamicPlant(Sensors):
             return
         self._q_seen = None
         self.resting = False
+        self._idle_speed = None
         qd_ref = (q_set - self._q_set) / self.ipo
         qdd_ref = (qd_ref - self._qd_ref) / self.ipo
         self._simulate(self._q_set, q_set, qd_ref, qdd_ref)
@@ -337,6 +340,11 @@ class DynamicPlant(Sensors):
     def _idle(self) -> None:
         self.time += self.ipo
         self.ticks += 1
+        cycle = self._cycle
+        if cycle is not None and cycle.speed is not None:
+            # an idle cycle leaves MuJoCo's state alone: the TCP speed stays what it was
+            self._idle_speed = cycle.speed
+        self._cycle = None  # a later first reading freezes this cycle's inputs
         if self._noisy:
             self._defer()
 
@@ -448,6 +456,7 @@ class DynamicPlant(Sensors):
     def _settle(self) -> None:
         """Snap onto the set-point at rest with the exact static torque (the cheap path)."""
         m, d = self._mj, self._data
+        self._idle_speed = None  # the state changes here
         d.qpos[:] = self._q_set
         d.qvel[:] = 0.0
         d.qacc[:] = 0.0
