@@ -31,6 +31,7 @@ synchronously on the fast path and with latency/faults in a worker (``kvp9_conne
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 from typing import Protocol
@@ -139,12 +140,12 @@ def _vb_round(x: float) -> int:
 
 
 def _clng(token: bytes) -> int:
-    """``CLng(token)`` for a token of ``Split(value, " ")``: error 13 unless a number."""
-    text = token.strip(b" ")
-    if not _VB_NUMBER.fullmatch(text):
+    """``CLng(token)`` for a token of ``Split(value, " ")`` (which holds no space): error 13
+    unless a number."""
+    if not _VB_NUMBER.fullmatch(token):
         raise VbError(13, f"type mismatch (CLng of {token!r})")
-    number = float(text.replace(b"D", b"E").replace(b"d", b"E"))
-    if number in (float("inf"), float("-inf")):
+    number = float(token.replace(b"D", b"E").replace(b"d", b"E"))
+    if math.isinf(number):
         raise VbError(6, "overflow")
     value = _vb_round(number)
     if not _LONG_MIN <= value <= _LONG_MAX:

@@ -112,6 +112,32 @@ def test_integer_word_and_right() -> None:
     assert long_to_word(-1) == H("FFFF") and long_to_word(0x12345) == H("2345")
 
 
+@pytest.mark.parametrize(
+    ("call", "text"),
+    [
+        (
+            lambda: kvp9._asc(b"", 1),
+            "run-time error 5: invalid procedure call (Asc of an empty string)",
+        ),
+        (
+            lambda: kvp9._right(b"a", -1),
+            "run-time error 5: invalid procedure call (Right with a negative length)",
+        ),
+        (lambda: kvp9._integer_word(H("80 00"), 1), "run-time error 6: overflow"),
+        (lambda: kvp9._clng(b"1E400"), "run-time error 6: overflow"),
+        (lambda: kvp9._clng(b"-1E400"), "run-time error 6: overflow"),
+        (lambda: kvp9._clng(b"2147483648"), "run-time error 6: overflow"),
+        (lambda: kvp9._clng(b"1\t"), "run-time error 13: type mismatch (CLng of b'1\\t')"),
+    ],
+)
+def test_vb_errors_say_their_number_and_meaning(call: Any, text: str) -> None:
+    """Each run-time error carries VB's number and says what it is, as VB's own message does."""
+    with pytest.raises(VbError) as err:
+        call()
+    assert str(err.value) == text
+    assert err.value.number == int(text.split()[2].rstrip(":"))
+
+
 def test_split_msg_blocks() -> None:
     assert split_msg(H("0002 4142 0001 43")) == [b"AB", b"C", *[b""] * 8]
     assert split_msg(H("0005 4142")) == [b"AB", *[b""] * 9]  # Mid past the end: what is there
