@@ -101,15 +101,15 @@ class _FastWire:
         self.responder = conn.emu.responder
         self.out: list[bytes] = []
         self.size = 0
-        #: perf_counter time at which the read in progress pauses, and the work done since it
-        #: was (re)started: at least one step per slice, so a read always makes progress.
+        #: perf_counter time at which the read in progress pauses, and whether it did a step
+        #: since it was (re)started: one step per slice at least, so a read always progresses.
         self.deadline = 0.0
-        self.steps = 0
+        self.moved = False
 
     async def _budget(self) -> None:
-        if self.steps and time.perf_counter() > self.deadline:
+        if self.moved and time.perf_counter() > self.deadline:
             await _PAUSE
-        self.steps += 1
+        self.moved = True
 
     async def show_var(self, name: bytes) -> bytes:
         await self._budget()
@@ -247,7 +247,7 @@ class Kvp9Connection(Connection):
         (if any) in the emulator's rounds."""
         wire = self._fast
         wire.deadline = time.perf_counter() + IMMEDIATE
-        wire.steps = 0
+        wire.moved = False
         self._resume(sock_server_read(data, wire, ping=self._ping, legacy_ids=self.emu.legacy_ids))
 
     def serve(self, budget: float) -> None:
@@ -257,7 +257,7 @@ class Kvp9Connection(Connection):
         if read is None:
             return
         self._fast.deadline = time.perf_counter() + budget
-        self._fast.steps = 0
+        self._fast.moved = False
         self._resume(read)
 
     def _resume(self, read: _Read) -> None:
@@ -348,17 +348,6 @@ class Kvp9Connection(Connection):
             transport.pause_reading()
 
     # -- used by the Emulator -------------------------------------------------------------
-
-    def close(self) -> None:
-        self.closed = True
-        self._unpark()
-        if self.transport is None:
-            return
-        if self.worker is None:
-            self.transport.close()
-        else:
-            self._backlog.clear()
-            self._close_after_work = True
 
     def drop(self) -> None:
         """Close now, discarding what is queued or unsent (idle timer, shutdown; the name the
