@@ -198,8 +198,9 @@ async def read_msg(
         return b"\x01" + long_to_word(len(value)) + value + (_STATUS_OK if ok else _STATUS_FAIL)
     if function == 2:
         value = await wire.show_var(name)
-        # Split("", " ") is an empty array (UBound -1); Split splits on every single space.
-        tokens = value.split(b" ") if value else []
+        # Split splits on every single space; Split("", " ") is an empty array (UBound -1),
+        # which gives no words just as one token (UBound 0) does
+        tokens = value.split(b" ")
         words = b""
         if len(tokens) - 1 > 0:  # If nDimVettore > 0 (one token gives nothing)
             words = b"".join(long_to_word(_clng(t)) for t in tokens)

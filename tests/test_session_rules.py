@@ -146,7 +146,7 @@ def test_a_request_larger_than_one_kvp_read_is_refused_before_sending() -> None:
 
 
 def test_fits_counts_requests_and_bytes_once_ids_are_echoed() -> None:
-    size = len(encode_read(0, "A"))  # 10
+    size = len(encode_read(0, "A"))  # 8
     s = session(max_in_flight=3, pipeline_bytes=3 * size)
     assert s.fits(10**6)  # a lone request always goes
     queue_reads(s, "A")
@@ -514,3 +514,42 @@ def test_clear_returns_every_pending_request_oldest_first() -> None:
     with pytest.raises(ProtocolError):
         s.dispatch(read_reply(c.msg_id, b"1"))
     assert s.ids == "unknown"
+
+
+def test_no_free_id_when_all_65536_are_pending() -> None:
+    s = session()
+    (p,) = queue_reads(s, "A")
+    s.by_id = dict.fromkeys(range(0x10000), p)  # every id taken (abandoned requests keep theirs)
+    with pytest.raises(ProtocolError) as err:
+        s.register("B", encode_read(0, "B"), "w", 1.0)
+    assert str(err.value) == "no free message id"
+
+
+def test_counters_and_bytes_add_up_over_many_replies() -> None:
+    s = session()
+    a = s.register_sent("A", encode_read(0x0100, "A"), "w", 1.0)
+    b = s.register_sent("BB", encode_read(0x0101, "BB"), "w", 1.0)
+    assert s.bytes_in_flight == a.size + b.size == 17
+    assert s.dispatch(read_reply(0x0101, b"1")) == (b, [a])
+    for _ in range(2):  # two rounds of two requests, the first of each dropped
+        _, second = queue_reads(s, "X", "Y")
+        s.dispatch(read_reply(second.msg_id, b"1"))
+    assert s.dropped_requests == 3 and list(s.queue) == [] and s.bytes_in_flight == 0
+    s = session("legacy")
+    for i in range(3):  # a legacy proxy repeating one label three times
+        p, _ = queue_reads(s, "X", "Y")
+        p.abandoned = True
+        if i == 0:
+            s.dispatch(read_reply(p.msg_id, b"1"))
+        else:
+            s.dispatch(read_reply(s.last_label or 0, b"1"))  # p's reply, mislabelled
+        s.dispatch(read_reply(s.last_label or 0, b"2"))  # q's reply, mislabelled
+    assert s.mislabeled_replies == 5
+
+
+def test_a_legacy_write_echo_is_taken_after_a_long_name() -> None:
+    """The echo is compared with the value block after the name, whose length is two bytes."""
+    s = session("legacy")
+    name = "W" * 300  # the name length's low byte alone (0x2C) would point into the name
+    p = s.register(name, encode_write(0, name, "12"), "w", 1.0)
+    assert s.dispatch(Reply(p.msg_id, Mode.WRITE, b"12")) == (p, [])

@@ -311,3 +311,14 @@ async def test_a_read_pauses_between_any_two_steps(
     if what == "elements of one write":
         assert len(seen) == 300 and emu.store.get("WA[300]") == 300
     assert len(set(seen)) >= 100, seen  # not all in one go
+
+
+@pytest.mark.parametrize("path", ["fast", "worker"])
+async def test_the_quirks_reach_either_path(emulator_factory: EmulatorFactory, path: str) -> None:
+    """``no-ping`` (before 9.0, PING is a variable like any other: unknown, an empty answer)
+    and ``legacy-ids`` (every reply of a read carries its first id) on both paths."""
+    emu = await kvp9(emulator_factory, path, quirks=frozenset({"no-ping", "legacy-ids"}))
+    async with await RawClient.connect(emu.host, emu.port) as c:
+        await c.send(encode_read(1, "PING") + encode_read(2, "$OV_PRO"))
+        assert await c.read_frame() == H("0001 0006 00 0000 000101")
+        assert await c.read_frame() == a100(1)

@@ -181,6 +181,8 @@ def _mode2(msg_id: int, name: bytes) -> bytes:
 def test_mode_2_words_and_counts() -> None:
     _, wire = walk(_mode2(1, b"A"), {b"A": b"1 -2 2.5"})
     assert wire.out == [H("0001 000C 02 0006 0001 FFFE 0002 000101")]
+    _, wire = walk(_mode2(1, b"A"), {b"A": b"7 8"})  # two tokens: UBound 1, both words
+    assert wire.out == [H("0001 000A 02 0004 0007 0008 000101")]
     _, wire = walk(_mode2(2, b"A"), {b"A": b"5"})  # one token: UBound 0, no words
     assert wire.out == [H("0002 0006 02 0000 000101")]
     _, wire = walk(_mode2(3, b"NONE"))  # Split("") is empty
