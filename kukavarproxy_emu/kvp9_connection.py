@@ -307,9 +307,7 @@ class Kvp9Connection(Connection):
                 self._account(outcome)
             if self._close_after_work and self.transport is not None:
                 self.transport.close()
-        except asyncio.CancelledError:
-            raise
-        except Exception:
+        except Exception:  # not a cancellation (connection_lost): that is no Exception
             log.exception("client %d (%s): internal error, closing", self.index, self.peer)
             self.abort()
         finally:

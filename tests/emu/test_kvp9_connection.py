@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import socket
 import time
 from typing import Any
 
@@ -272,11 +273,13 @@ async def test_a_read_pauses_between_any_two_steps(
     emu = await kvp9(emulator_factory, dat_text="DECL INT WA[300]\n")
     tick = [0]
     seen: list[int] = []  # the loop iteration of every element write, or of every socket write
+    pending: list[int] = []  # reads parked or waiting, as info() tells, at every element write
     if what == "elements of one write":
         set_var = emu.responder.set_var
 
         def counted_set(name: str, value: str) -> bool:
             seen.append(tick[0])
+            pending.append(connection(emu).info().pending)
             return set_var(name, value)
 
         monkeypatch.setattr(emu.responder, "set_var", counted_set)
@@ -306,10 +309,12 @@ async def test_a_read_pauses_between_any_two_steps(
             await c.send(chunk)
             for _ in range(replies):
                 await c.read_frame(timeout=10)
+            assert await c.request(encode_read(9, "$OV_PRO")) == a100(9)  # reading again
     finally:
         counting.cancel()
     if what == "elements of one write":
         assert len(seen) == 300 and emu.store.get("WA[300]") == 300
+        assert set(pending[1:]) == {1}  # the read parked: one pending
     assert len(set(seen)) >= 100, seen  # not all in one go
 
 
@@ -322,3 +327,25 @@ async def test_the_quirks_reach_either_path(emulator_factory: EmulatorFactory, p
         await c.send(encode_read(1, "PING") + encode_read(2, "$OV_PRO"))
         assert await c.read_frame() == H("0001 0006 00 0000 000101")
         assert await c.read_frame() == a100(1)
+
+
+async def test_a_dropped_client_that_does_not_read_is_cut_at_once(
+    emulator_factory: EmulatorFactory,
+) -> None:
+    """A client that asked for 48 KB of replies and reads none (tiny socket buffers on both
+    ends) goes idle: the idle timer drops it at once, the replies waiting in user space
+    discarded, rather than waiting for a flush that never comes."""
+    emu = await kvp9(emulator_factory, idle_timeout=0.3)
+    with socket.socket() as sock:  # a plain socket nobody reads from
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        sock.connect((emu.host, emu.port))
+        await wait_until(lambda: emu.stats.clients == 1, what="connected")
+        conn = connection(emu)
+        assert conn.transport is not None
+        conn.transport.get_extra_info("socket").setsockopt(
+            socket.SOL_SOCKET, socket.SO_SNDBUF, 4096
+        )
+        sock.sendall(encode_read(2, "$IN[]") + encode_read(3, "$IN[]"))
+        await wait_until(lambda: conn.info().write_buffer > 0, what="replies waiting")
+        await wait_until(lambda: emu.stats.idle_drops == 1, what="the idle drop")
+        await wait_until(lambda: emu.stats.clients == 0, timeout=3, what="the slot freed")
