@@ -233,7 +233,8 @@ async def sock_server_read(
     value_to_write = b""  # Dim sValueToWrite: "" at every event
     messages = 0
     try:
-        _asc(buffer, 1), _asc(buffer, 2)  # lMsgID = CLng(Asc(Mid(.., 1, 1))) * &H100 + ...
+        # lMsgID = CLng(Asc(Mid(.., 1, 1))) * &H100 + ...: its Asc() of a missing byte raises
+        # no sooner than the length's below, which needs all four header bytes
         msg_id = _mid(buffer, 1, 2)
         length = _integer_word(buffer, 3)
         # The loop test is Len >= L, not L + 4: a request up to 4 bytes short is still parsed
@@ -248,7 +249,6 @@ async def sock_server_read(
                 await wire.send(value_to_write)
             buffer = _right(buffer, len(buffer) - (length + 4))
             if len(buffer) > 3:
-                _asc(buffer, 1), _asc(buffer, 2)
                 if not legacy_ids:
                     msg_id = _mid(buffer, 1, 2)
                 length = _integer_word(buffer, 3)

@@ -247,6 +247,9 @@ def test_the_loop_runs_while_the_rest_holds_l_bytes() -> None:
     # a rest of 3 bytes keeps the old L; with L <= 3 the loop goes on and Asc fails at byte 5
     out, wire = walk(H("0001 0003 00 0000") + H("000102"))
     assert not out.completed and len(wire.out) == 1
+    # a rest of 3 bytes with the old L = 10 > 3: the loop ends, the read is complete
+    out, wire = walk(encode_read(1, "V") + H("000102"), {b"V": b"1"})
+    assert len(wire.out) == 1 and out == ReadOutcome(1, completed=True)
     # a rest of 4 bytes is a new header (L = 0); its mode byte is missing: Asc("") ends it
     out, wire = walk(encode_read(1, "V") + H("0002 0000"), {b"V": b"1"})
     assert len(wire.out) == 1 and out.messages == 2 and not out.completed
