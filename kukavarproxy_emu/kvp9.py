@@ -113,7 +113,7 @@ def _right(s: bytes, n: int) -> bytes:
     """``Right(s, n)``: the last n bytes (all of s when n is larger); a negative n is error 5."""
     if n < 0:
         raise VbError(5, "invalid procedure call (Right with a negative length)")
-    return s[max(0, len(s) - n) :] if n else b""
+    return s[max(0, len(s) - n) :]  # n = 0 starts at len(s): b""
 
 
 def _integer_word(s: bytes, pos: int) -> int:
