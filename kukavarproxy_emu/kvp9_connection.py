@@ -193,7 +193,6 @@ class Kvp9Connection(Connection):
         self._backlog: deque[bytes] = deque()  # at most one read: reading pauses meanwhile
         #: The fast path's read in progress, parked until the emulator's next round.
         self._parked: _Read | None = None
-        self._close_after_work = False
         self._fast = _FastWire(self)
         self._slow = _SlowWire(self)
         self._ping = emu.responder.ping
@@ -235,9 +234,8 @@ class Kvp9Connection(Connection):
 
     def eof_received(self) -> bool:
         # KVP drops the client in its Disconnect event, after the reads before it were served.
-        if self.worker is not None or self._parked is not None:
-            self._close_after_work = True
-            return True
+        # So does closing here: reading is paused while a read is served (parked or in the
+        # worker), so the end of the stream is only seen once the reads before it are done.
         return False
 
     # -- serving reads --------------------------------------------------------------------
@@ -282,11 +280,9 @@ class Kvp9Connection(Connection):
         self.emu.enqueue(self)
 
     def _next_read(self) -> None:
-        """After a fast-path read: a read that arrived meanwhile, the close owed, or reading."""
+        """After a fast-path read: a read that arrived meanwhile, or reading again."""
         if self._backlog and not self.closed:
             self._start(self._backlog.popleft())
-        elif self._close_after_work and self.transport is not None:
-            self.transport.close()
         else:
             self._set_reading(True)
 
@@ -305,8 +301,6 @@ class Kvp9Connection(Connection):
                     data, self._slow, ping=self._ping, legacy_ids=self.emu.legacy_ids
                 )
                 self._account(outcome)
-            if self._close_after_work and self.transport is not None:
-                self.transport.close()
         except Exception:  # not a cancellation (connection_lost): that is no Exception
             log.exception("client %d (%s): internal error, closing", self.index, self.peer)
             self.abort()
