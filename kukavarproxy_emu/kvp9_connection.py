@@ -343,18 +343,14 @@ class Kvp9Connection(Connection):
 
     def drop(self) -> None:
         """Close now, discarding what is queued or unsent (idle timer, shutdown; the name the
-        reworked robust connection uses for this)."""
+        reworked robust connection uses for this). Always an abort: with nothing unsent it is
+        the same as a close, and with replies unsent a close would wait for a peer that does
+        not read."""
         self.closed = True
         self._backlog.clear()
-        parked = self._parked is not None
         self._unpark()
-        transport = self.transport
-        if transport is None:
-            return
-        if transport.get_write_buffer_size() or self.worker is not None or parked:
-            transport.abort()
-        else:
-            transport.close()
+        if self.transport is not None:
+            self.transport.abort()
 
     def abort(self) -> None:
         self.closed = True

@@ -358,3 +358,28 @@ async def test_a_dropped_client_that_does_not_read_is_cut_at_once(
         await wait_until(lambda: conn.info().write_buffer > 0, what="replies waiting")
         await wait_until(lambda: emu.stats.idle_drops == 1, what="the idle drop")
         await wait_until(lambda: emu.stats.clients == 0, timeout=3, what="the slot freed")
+
+
+async def test_a_parked_read_goes_on_for_its_rounds_budget(
+    emulator_factory: EmulatorFactory, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A read parked at once (no immediate budget) continues in the emulator's next round for
+    that round's whole budget: with a round of 5 s, 100 reads are done in that one round."""
+    from kukavarproxy_emu import kvp9_connection, server
+
+    monkeypatch.setattr(kvp9_connection, "IMMEDIATE", 0.0)
+    monkeypatch.setattr(server, "SLICE", 5.0)
+    monkeypatch.setattr(server, "ROUND", 5.0)
+    emu = await kvp9(emulator_factory)
+    served: list[float] = []
+    original = Kvp9Connection.serve
+
+    def counted(self: Kvp9Connection, budget: float) -> None:
+        served.append(budget)
+        original(self, budget)
+
+    monkeypatch.setattr(Kvp9Connection, "serve", counted)
+    async with await RawClient.connect(emu.host, emu.port) as c:
+        await c.send(b"".join(encode_read(i, "$OV_PRO") for i in range(100)))
+        assert [await c.read_frame() for _ in range(100)] == [a100(i) for i in range(100)]
+    assert len(served) == 1 and served[0] > 4.0
