@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import socket
+import struct
 import time
 from typing import Any
 
@@ -66,6 +67,8 @@ async def test_every_read_is_counted(emulator_factory: EmulatorFactory, path: st
         assert [await c.read_frame() for _ in range(3)] == [a100(2), a100(3), a100(4)]
         await c.send(H("000100"))  # three bytes: the read ends in errRead, nothing answered
         await wait_until(lambda: emu.stats.protocol_errors == 1, what="the errRead counted")
+        await c.send(H("000100"))
+        await wait_until(lambda: emu.stats.protocol_errors == 2, what="another errRead")
         await wait_until(lambda: not connection(emu).info().reading_paused, what="reading")
         port = c.writer.get_extra_info("sockname")[1]
         (info,) = emu.connections()
@@ -77,8 +80,8 @@ async def test_every_read_is_counted(emulator_factory: EmulatorFactory, path: st
             pending=0,
             write_buffer=0,
             reading_paused=False,
-            reads=3,
-            bytes_read=14 + 42 + 3,
+            reads=4,
+            bytes_read=14 + 42 + 3 + 3,
             largest_read=42,
             most_messages=3,
         )
@@ -249,12 +252,16 @@ async def test_a_big_read_is_written_every_16_kib(
 
     monkeypatch.setattr(Kvp9Connection, "write", logged)
     async with await RawClient.connect(emu.host, emu.port) as c:
-        await c.send(b"".join(encode_read(i, "BIG[]") for i in range(10)))
-        assert [len(await c.read_frame()) for _ in range(10)] == [2512] * 10
-        assert writes == [7 * 2512, 3 * 2512]  # 7 * 2512 > 16384 >= 6 * 2512
-        await c.send(b"".join(encode_read(i, "MID[]") for i in range(9)))
-        assert [len(await c.read_frame()) for _ in range(9)] == [2048] * 9
-        assert writes[2:] == [9 * 2048]
+        for batch in ("MID[]", "BIG[]", "MID[]"):  # the count starts from 0 at every read
+            await c.send(
+                b"".join(encode_read(i, batch) for i in range(10 if batch == "BIG[]" else 9))
+            )
+            if batch == "BIG[]":
+                assert [len(await c.read_frame()) for _ in range(10)] == [2512] * 10
+            else:
+                assert [len(await c.read_frame()) for _ in range(9)] == [2048] * 9
+    # 7 * 2512 > 16384 >= 6 * 2512
+    assert writes == [9 * 2048, 7 * 2512, 3 * 2512, 9 * 2048]
 
 
 @pytest.mark.parametrize("what", ["elements of one write", "replies without CrossComm"])
@@ -383,3 +390,43 @@ async def test_a_parked_read_goes_on_for_its_rounds_budget(
         await c.send(b"".join(encode_read(i, "$OV_PRO") for i in range(100)))
         assert [await c.read_frame() for _ in range(100)] == [a100(i) for i in range(100)]
     assert len(served) == 1 and served[0] > 4.0
+
+
+async def test_text_outside_the_code_page_is_answered_as_question_marks(
+    emulator_factory: EmulatorFactory, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """KVP's replies are single-byte ANSI: a character the code page lacks goes out as ``?``,
+    as in the robust mode (planted: a variable whose text holds one)."""
+    emu = await kvp9(emulator_factory)
+    show = emu.responder.show_var
+    monkeypatch.setattr(
+        emu.responder, "show_var", lambda name: "\u20ac 5" if name == "EURO" else show(name)
+    )
+    async with await RawClient.connect(emu.host, emu.port) as c:
+        assert await c.request(encode_read(1, "EURO")) == H("0001 0009 00 0003 3F2035 000101")
+
+
+async def test_a_client_that_resets_during_a_long_read(
+    emulator_factory: EmulatorFactory, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A client that resets the connection while its long read is parked: the read is walked
+    to its end all the same (as VB's loop goes on after a failed Write), its replies go
+    nowhere, and nothing is written to the dead socket (asyncio would log that)."""
+    from kukavarproxy_emu import kvp9_connection, server
+
+    monkeypatch.setattr(kvp9_connection, "IMMEDIATE", 0.0)
+    monkeypatch.setattr(server, "SLICE", 0.0)
+    monkeypatch.setattr(server, "ROUND", 0.0)
+    emu = await kvp9(emulator_factory)
+    with socket.socket() as sock:
+        sock.connect((emu.host, emu.port))
+        await wait_until(lambda: emu.stats.clients == 1, what="connected")
+        conn = connection(emu)
+        sock.sendall(b"".join(encode_read(i, "$IN[]") for i in range(40)))
+        await wait_until(  # every loop iteration: the read moves one step per round
+            lambda: conn.replies > 0 and conn._parked is not None, interval=0, what="parked"
+        )
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+    await wait_until(lambda: conn.closed, what="the reset seen")
+    await wait_until(lambda: conn._parked is None, timeout=10, what="the read walked to its end")
+    assert conn.replies == 40 and emu.stats.clients == 0
