@@ -67,6 +67,7 @@ def walk(data: bytes, values: dict[bytes, bytes] | None = None) -> tuple[ReadOut
         (b"-2147483648", 0),  # the smallest
         (b"1E3", 1000),
         (b"1D2", 100),  # VB reads D exponents too
+        (b"1d2", 100),  # in either case
         (b"+7", 7),
         (b".5", 0),
         (b"3.", 3),
