@@ -252,7 +252,8 @@ def test_the_loop_runs_while_the_rest_holds_l_bytes() -> None:
     out, wire = walk(encode_read(1, "V") + H("000102"), {b"V": b"1"})
     assert len(wire.out) == 1 and out == ReadOutcome(1, completed=True)
     # a rest of 4 bytes is a new header (L = 0); its mode byte is missing: Asc("") ends it
-    out, wire = walk(encode_read(1, "V") + H("0002 0000"), {b"V": b"1"})
+    # (after a request whose L = 10 > 4, which the new header must replace)
+    out, wire = walk(encode_read(1, "$OV_PRO") + H("0002 0000"), {b"$OV_PRO": b"1"})
     assert len(wire.out) == 1 and out.messages == 2 and not out.completed
     # with a fifth byte the mode is there: L = 0 reads an empty name
     out, wire = walk(encode_read(1, "V") + H("0002 0000 00"), {b"V": b"1"})
