@@ -516,6 +516,15 @@ def test_clear_returns_every_pending_request_oldest_first() -> None:
     assert s.ids == "unknown"
 
 
+def test_the_last_free_id_is_found_after_65535_taken() -> None:
+    s = session()
+    (p,) = queue_reads(s, "A")
+    s.by_id = {i: p for i in range(0x10000) if i != 0x1233}
+    s.next_id = 0x1234  # the free id is the last one tried
+    assert s.register("B", encode_read(0, "B"), "w", 1.0).msg_id == 0x1233
+    assert s.next_id == 0x1234
+
+
 def test_no_free_id_when_all_65536_are_pending() -> None:
     s = session()
     (p,) = queue_reads(s, "A")
