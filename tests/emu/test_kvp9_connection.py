@@ -251,7 +251,24 @@ async def test_a_big_read_is_written_every_16_kib(
         original(self, data)
 
     monkeypatch.setattr(Kvp9Connection, "write", logged)
+    serve = Kvp9Connection.serve
+    served: list[float] = []
+
+    def counted(self: Kvp9Connection, budget: float) -> None:
+        served.append(budget)
+        serve(self, budget)
+
+    monkeypatch.setattr(Kvp9Connection, "serve", counted)
     async with await RawClient.connect(emu.host, emu.port) as c:
+        assert connection(emu).info() == Kvp9ConnectionInfo(  # nothing read yet: all zero
+            index=1,
+            peer=f"127.0.0.1:{c.writer.get_extra_info('sockname')[1]}",
+            received=0,
+            buffered=0,
+            pending=0,
+            write_buffer=0,
+            reading_paused=False,
+        )
         for batch in ("MID[]", "BIG[]", "MID[]"):  # the count starts from 0 at every read
             await c.send(
                 b"".join(encode_read(i, batch) for i in range(10 if batch == "BIG[]" else 9))
@@ -262,6 +279,7 @@ async def test_a_big_read_is_written_every_16_kib(
                 assert [len(await c.read_frame()) for _ in range(9)] == [2048] * 9
     # 7 * 2512 > 16384 >= 6 * 2512
     assert writes == [9 * 2048, 7 * 2512, 3 * 2512, 9 * 2048]
+    assert served == []  # within the immediate budget: each read answered at once, never parked
 
 
 @pytest.mark.parametrize("what", ["elements of one write", "replies without CrossComm"])
