@@ -473,8 +473,9 @@ def test_answered_idle_checks_and_labels() -> None:
     frame = encode_write(0x0102, "W", "5")
     s.answered_idle("W", frame, Reply(0x0102, Mode.WRITE, b"5"))
     assert s.last_label == 0x0102
-    with pytest.raises(ProtocolError, match="does not echo"):
+    with pytest.raises(ProtocolError) as err:
         s.answered_idle("W", frame, Reply(0x0103, Mode.WRITE, b"6"))
+    assert str(err.value) == "reply id 259 does not echo the value written to 'W'"
     assert s.last_label == 0x0102
 
 
