@@ -491,8 +491,14 @@ def test_answered_read_learns_and_checks_shapes() -> None:
     s.answered_read("N", 7, b"12")
     s.answered_read("N", 8, b"-3")  # a number stays a number
     assert s.text_prefix("N") is None  # a number is no prefix of its text
-    with pytest.raises(ProtocolError, match="reads like 'BOOL', but that variable read like"):
+    with pytest.raises(ProtocolError) as err:
         s.answered_read("N", 9, b"TRUE")
+    assert str(err.value) == (
+        "reply id 9 for 'N' reads like 'BOOL', but that variable read like 'number' before:"
+        " a reply for another variable"
+    )
+    with pytest.raises(ProtocolError):  # only a literal prefix shape is taken by its prefix
+        s.answered_read("N", 10, b"number1")
     s.answered_read("S", 1, b'"ab"')
     with pytest.raises(ProtocolError):
         s.answered_read("S", 2, b"#X")
