@@ -69,6 +69,7 @@ def test_an_unknown_id_policy_is_named(policy: str) -> None:
     [
         (b"{E6AXIS: A1 1.0}", b"{E6AXIS:"),
         (b"{:", b"{:"),  # the colon right after the brace still ends the type name
+        (b"{LOAD: M 1.5, CM {FRAME: X 0}}", b"{LOAD:"),  # the first colon, not a member's
         (b"{A1 1.0}", b"{"),  # a struct without a type name
         (b"{" + b"x" * 62 + b":", b"{" + b"x" * 62 + b":"),  # colon at 63: within the 64
         (b"{" + b"x" * 63 + b": A", b"{"),  # colon at 64: past the search, the brace alone
