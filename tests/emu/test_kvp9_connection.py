@@ -44,6 +44,22 @@ def connection(emu: Emulator) -> Kvp9Connection:
     return conn
 
 
+def idle_info(c: RawClient, **counters: int) -> Kvp9ConnectionInfo:
+    """What ``info()`` says of the emulator's first connection, ``c``, with nothing in progress
+    (``counters``: those not zero)."""
+    port = c.writer.get_extra_info("sockname")[1]
+    return Kvp9ConnectionInfo(
+        index=1,
+        peer=f"127.0.0.1:{port}",
+        received=counters.pop("received", 0),
+        buffered=0,
+        pending=0,
+        write_buffer=0,
+        reading_paused=False,
+        **counters,
+    )
+
+
 async def read_all(c: RawClient, timeout: float = 5.0) -> bytes:
     """Everything until the server closes; a reset ends it too."""
     data = b""
@@ -70,20 +86,9 @@ async def test_every_read_is_counted(emulator_factory: EmulatorFactory, path: st
         await c.send(H("000100"))
         await wait_until(lambda: emu.stats.protocol_errors == 2, what="another errRead")
         await wait_until(lambda: not connection(emu).info().reading_paused, what="reading")
-        port = c.writer.get_extra_info("sockname")[1]
         (info,) = emu.connections()
-        assert info == Kvp9ConnectionInfo(
-            index=1,
-            peer=f"127.0.0.1:{port}",
-            received=4,
-            buffered=0,
-            pending=0,
-            write_buffer=0,
-            reading_paused=False,
-            reads=4,
-            bytes_read=14 + 42 + 3 + 3,
-            largest_read=42,
-            most_messages=3,
+        assert info == idle_info(
+            c, received=4, reads=4, bytes_read=14 + 42 + 3 + 3, largest_read=42, most_messages=3
         )
         assert emu.stats.requests == 4 and emu.stats.clients == 1
         assert (await c.request(encode_read(5, "$OV_PRO")))[:2] == H("0005")  # still served
@@ -260,15 +265,7 @@ async def test_a_big_read_is_written_every_16_kib(
 
     monkeypatch.setattr(Kvp9Connection, "serve", counted)
     async with await RawClient.connect(emu.host, emu.port) as c:
-        assert connection(emu).info() == Kvp9ConnectionInfo(  # nothing read yet: all zero
-            index=1,
-            peer=f"127.0.0.1:{c.writer.get_extra_info('sockname')[1]}",
-            received=0,
-            buffered=0,
-            pending=0,
-            write_buffer=0,
-            reading_paused=False,
-        )
+        assert connection(emu).info() == idle_info(c)  # nothing read yet: all zero
         for batch in ("MID[]", "BIG[]", "MID[]"):  # the count starts from 0 at every read
             await c.send(
                 b"".join(encode_read(i, batch) for i in range(10 if batch == "BIG[]" else 9))
