@@ -31,6 +31,7 @@ synchronously on the fast path and with latency/faults in a worker (``kvp9_conne
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 from typing import Protocol
@@ -112,7 +113,7 @@ def _right(s: bytes, n: int) -> bytes:
     """``Right(s, n)``: the last n bytes (all of s when n is larger); a negative n is error 5."""
     if n < 0:
         raise VbError(5, "invalid procedure call (Right with a negative length)")
-    return s[max(0, len(s) - n) :] if n else b""
+    return s[max(0, len(s) - n) :]  # n = 0 starts at len(s): b""
 
 
 def _integer_word(s: bytes, pos: int) -> int:
@@ -139,12 +140,12 @@ def _vb_round(x: float) -> int:
 
 
 def _clng(token: bytes) -> int:
-    """``CLng(token)`` for a token of ``Split(value, " ")``: error 13 unless a number."""
-    text = token.strip(b" ")
-    if not _VB_NUMBER.fullmatch(text):
+    """``CLng(token)`` for a token of ``Split(value, " ")`` (which holds no space): error 13
+    unless a number."""
+    if not _VB_NUMBER.fullmatch(token):
         raise VbError(13, f"type mismatch (CLng of {token!r})")
-    number = float(text.replace(b"D", b"E").replace(b"d", b"E"))
-    if number in (float("inf"), float("-inf")):
+    number = float(token.replace(b"D", b"E").replace(b"d", b"E"))
+    if math.isinf(number):
         raise VbError(6, "overflow")
     value = _vb_round(number)
     if not _LONG_MIN <= value <= _LONG_MAX:
@@ -197,8 +198,9 @@ async def read_msg(
         return b"\x01" + long_to_word(len(value)) + value + (_STATUS_OK if ok else _STATUS_FAIL)
     if function == 2:
         value = await wire.show_var(name)
-        # Split("", " ") is an empty array (UBound -1); Split splits on every single space.
-        tokens = value.split(b" ") if value else []
+        # Split splits on every single space; Split("", " ") is an empty array (UBound -1),
+        # which gives no words just as one token (UBound 0) does
+        tokens = value.split(b" ")
         words = b""
         if len(tokens) - 1 > 0:  # If nDimVettore > 0 (one token gives nothing)
             words = b"".join(long_to_word(_clng(t)) for t in tokens)
@@ -231,7 +233,8 @@ async def sock_server_read(
     value_to_write = b""  # Dim sValueToWrite: "" at every event
     messages = 0
     try:
-        _asc(buffer, 1), _asc(buffer, 2)  # lMsgID = CLng(Asc(Mid(.., 1, 1))) * &H100 + ...
+        # lMsgID = CLng(Asc(Mid(.., 1, 1))) * &H100 + ...: its Asc() of a missing byte raises
+        # no sooner than the length's below, which needs all four header bytes
         msg_id = _mid(buffer, 1, 2)
         length = _integer_word(buffer, 3)
         # The loop test is Len >= L, not L + 4: a request up to 4 bytes short is still parsed
@@ -246,7 +249,6 @@ async def sock_server_read(
                 await wire.send(value_to_write)
             buffer = _right(buffer, len(buffer) - (length + 4))
             if len(buffer) > 3:
-                _asc(buffer, 1), _asc(buffer, 2)
                 if not legacy_ids:
                     msg_id = _mid(buffer, 1, 2)
                 length = _integer_word(buffer, 3)

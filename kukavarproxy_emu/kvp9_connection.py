@@ -101,15 +101,15 @@ class _FastWire:
         self.responder = conn.emu.responder
         self.out: list[bytes] = []
         self.size = 0
-        #: perf_counter time at which the read in progress pauses, and the work done since it
-        #: was (re)started: at least one step per slice, so a read always makes progress.
+        #: perf_counter time at which the read in progress pauses, and whether it did a step
+        #: since it was (re)started: one step per slice at least, so a read always progresses.
         self.deadline = 0.0
-        self.steps = 0
+        self.moved = False
 
     async def _budget(self) -> None:
-        if self.steps and time.perf_counter() > self.deadline:
+        if self.moved and time.perf_counter() > self.deadline:
             await _PAUSE
-        self.steps += 1
+        self.moved = True
 
     async def show_var(self, name: bytes) -> bytes:
         await self._budget()
@@ -193,7 +193,6 @@ class Kvp9Connection(Connection):
         self._backlog: deque[bytes] = deque()  # at most one read: reading pauses meanwhile
         #: The fast path's read in progress, parked until the emulator's next round.
         self._parked: _Read | None = None
-        self._close_after_work = False
         self._fast = _FastWire(self)
         self._slow = _SlowWire(self)
         self._ping = emu.responder.ping
@@ -235,9 +234,8 @@ class Kvp9Connection(Connection):
 
     def eof_received(self) -> bool:
         # KVP drops the client in its Disconnect event, after the reads before it were served.
-        if self.worker is not None or self._parked is not None:
-            self._close_after_work = True
-            return True
+        # So does closing here: reading is paused while a read is served (parked or in the
+        # worker), so the end of the stream is only seen once the reads before it are done.
         return False
 
     # -- serving reads --------------------------------------------------------------------
@@ -247,7 +245,7 @@ class Kvp9Connection(Connection):
         (if any) in the emulator's rounds."""
         wire = self._fast
         wire.deadline = time.perf_counter() + IMMEDIATE
-        wire.steps = 0
+        wire.moved = False
         self._resume(sock_server_read(data, wire, ping=self._ping, legacy_ids=self.emu.legacy_ids))
 
     def serve(self, budget: float) -> None:
@@ -257,7 +255,7 @@ class Kvp9Connection(Connection):
         if read is None:
             return
         self._fast.deadline = time.perf_counter() + budget
-        self._fast.steps = 0
+        self._fast.moved = False
         self._resume(read)
 
     def _resume(self, read: _Read) -> None:
@@ -282,11 +280,9 @@ class Kvp9Connection(Connection):
         self.emu.enqueue(self)
 
     def _next_read(self) -> None:
-        """After a fast-path read: a read that arrived meanwhile, the close owed, or reading."""
+        """After a fast-path read: a read that arrived meanwhile, or reading again."""
         if self._backlog and not self.closed:
             self._start(self._backlog.popleft())
-        elif self._close_after_work and self.transport is not None:
-            self.transport.close()
         else:
             self._set_reading(True)
 
@@ -305,11 +301,7 @@ class Kvp9Connection(Connection):
                     data, self._slow, ping=self._ping, legacy_ids=self.emu.legacy_ids
                 )
                 self._account(outcome)
-            if self._close_after_work and self.transport is not None:
-                self.transport.close()
-        except asyncio.CancelledError:
-            raise
-        except Exception:
+        except Exception:  # not a cancellation (connection_lost): that is no Exception
             log.exception("client %d (%s): internal error, closing", self.index, self.peer)
             self.abort()
         finally:
@@ -349,31 +341,16 @@ class Kvp9Connection(Connection):
 
     # -- used by the Emulator -------------------------------------------------------------
 
-    def close(self) -> None:
-        self.closed = True
-        self._unpark()
-        if self.transport is None:
-            return
-        if self.worker is None:
-            self.transport.close()
-        else:
-            self._backlog.clear()
-            self._close_after_work = True
-
     def drop(self) -> None:
         """Close now, discarding what is queued or unsent (idle timer, shutdown; the name the
-        reworked robust connection uses for this)."""
+        reworked robust connection uses for this). Always an abort: with nothing unsent it is
+        the same as a close, and with replies unsent a close would wait for a peer that does
+        not read."""
         self.closed = True
         self._backlog.clear()
-        parked = self._parked is not None
         self._unpark()
-        transport = self.transport
-        if transport is None:
-            return
-        if transport.get_write_buffer_size() or self.worker is not None or parked:
-            transport.abort()
-        else:
-            transport.close()
+        if self.transport is not None:
+            self.transport.abort()
 
     def abort(self) -> None:
         self.closed = True

@@ -67,6 +67,7 @@ def walk(data: bytes, values: dict[bytes, bytes] | None = None) -> tuple[ReadOut
         (b"-2147483648", 0),  # the smallest
         (b"1E3", 1000),
         (b"1D2", 100),  # VB reads D exponents too
+        (b"1d2", 100),  # in either case
         (b"+7", 7),
         (b".5", 0),
         (b"3.", 3),
@@ -112,6 +113,32 @@ def test_integer_word_and_right() -> None:
     assert long_to_word(-1) == H("FFFF") and long_to_word(0x12345) == H("2345")
 
 
+@pytest.mark.parametrize(
+    ("call", "text"),
+    [
+        (
+            lambda: kvp9._asc(b"", 1),
+            "run-time error 5: invalid procedure call (Asc of an empty string)",
+        ),
+        (
+            lambda: kvp9._right(b"a", -1),
+            "run-time error 5: invalid procedure call (Right with a negative length)",
+        ),
+        (lambda: kvp9._integer_word(H("80 00"), 1), "run-time error 6: overflow"),
+        (lambda: kvp9._clng(b"1E400"), "run-time error 6: overflow"),
+        (lambda: kvp9._clng(b"-1E400"), "run-time error 6: overflow"),
+        (lambda: kvp9._clng(b"2147483648"), "run-time error 6: overflow"),
+        (lambda: kvp9._clng(b"1\t"), "run-time error 13: type mismatch (CLng of b'1\\t')"),
+    ],
+)
+def test_vb_errors_say_their_number_and_meaning(call: Any, text: str) -> None:
+    """Each run-time error carries VB's number and says what it is, as VB's own message does."""
+    with pytest.raises(VbError) as err:
+        call()
+    assert str(err.value) == text
+    assert err.value.number == int(text.split()[2].rstrip(":"))
+
+
 def test_split_msg_blocks() -> None:
     assert split_msg(H("0002 4142 0001 43")) == [b"AB", b"C", *[b""] * 8]
     assert split_msg(H("0005 4142")) == [b"AB", *[b""] * 9]  # Mid past the end: what is there
@@ -155,6 +182,8 @@ def _mode2(msg_id: int, name: bytes) -> bytes:
 def test_mode_2_words_and_counts() -> None:
     _, wire = walk(_mode2(1, b"A"), {b"A": b"1 -2 2.5"})
     assert wire.out == [H("0001 000C 02 0006 0001 FFFE 0002 000101")]
+    _, wire = walk(_mode2(1, b"A"), {b"A": b"7 8"})  # two tokens: UBound 1, both words
+    assert wire.out == [H("0001 000A 02 0004 0007 0008 000101")]
     _, wire = walk(_mode2(2, b"A"), {b"A": b"5"})  # one token: UBound 0, no words
     assert wire.out == [H("0002 0006 02 0000 000101")]
     _, wire = walk(_mode2(3, b"NONE"))  # Split("") is empty
@@ -214,13 +243,17 @@ def test_the_loop_runs_while_the_rest_holds_l_bytes() -> None:
     # L = 10, but only 9 bytes after the header: Len(buffer) >= L still holds (13 >= 10), the
     # request is read short ("$OV_PR"), then Right(buffer, 13 - 14) raises: the read ends
     out, wire = walk(H("0001 000A 00 0007") + b"$OV_PR", {b"$OV_PR": b"x"})
-    assert wire.out == [H("0001 0007 00 0001 78 000101")] and not out.completed
-    assert out.messages == 1
+    assert wire.out == [H("0001 0007 00 0001 78 000101")]
+    assert out == ReadOutcome(1, completed=False)
     # a rest of 3 bytes keeps the old L; with L <= 3 the loop goes on and Asc fails at byte 5
     out, wire = walk(H("0001 0003 00 0000") + H("000102"))
     assert not out.completed and len(wire.out) == 1
+    # a rest of 3 bytes with the old L = 10 > 3: the loop ends, the read is complete
+    out, wire = walk(encode_read(1, "V") + H("000102"), {b"V": b"1"})
+    assert len(wire.out) == 1 and out == ReadOutcome(1, completed=True)
     # a rest of 4 bytes is a new header (L = 0); its mode byte is missing: Asc("") ends it
-    out, wire = walk(encode_read(1, "V") + H("0002 0000"), {b"V": b"1"})
+    # (after a request whose L = 10 > 4, which the new header must replace)
+    out, wire = walk(encode_read(1, "$OV_PRO") + H("0002 0000"), {b"$OV_PRO": b"1"})
     assert len(wire.out) == 1 and out.messages == 2 and not out.completed
     # with a fifth byte the mode is there: L = 0 reads an empty name
     out, wire = walk(encode_read(1, "V") + H("0002 0000 00"), {b"V": b"1"})
