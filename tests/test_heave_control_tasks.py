@@ -1,0 +1,218 @@
+"""The heave control server's own duties, each in well under a second and without a robot
+where none is needed: the accelerometer samples it feeds to the estimator (the board's clock
+mapped onto ours, roll and pitch), the platform task's heartbeat and period against the real
+platform simulator over Modbus TCP, a prediction that stops at ``max_lead`` past a stale
+platform stream, and ``stop()``: requests in flight finish, a task that hangs is cancelled
+after the timeout.
+
+The tasks against the robot (start-up, the target the robot follows, the lag estimator's feed)
+are in tests/test_heave_control_server.py.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import AsyncIterator
+
+import numpy as np
+import pytest
+from pyopenshowvar_apps.heave.accel import AccelSample
+from pyopenshowvar_apps.heave.control import ControlConfig, ControlLaw, ControlServer
+from pyopenshowvar_apps.heave.master import PlatformClient
+from pyopenshowvar_apps.heave.operator import OperatorCommand, OperatorInput
+from pyopenshowvar_apps.heave.registers import PlatformState
+from pyopenshowvar_apps.heave.simulator import PlatformConfig, PlatformSimulator
+
+THETA0 = np.array([20.0, -80.0, 100.0, 15.0, 55.0, 20.0])
+
+
+# --- the accelerometer path -----------------------------------------------------------------------
+def test_board_samples_reach_the_estimator_on_our_clock() -> None:
+    # attitude "accel": roll and pitch come from the board alone, shifted back by its filter lag
+    server = ControlServer(None, None, accel=object(), config=ControlConfig(attitude="accel"))
+    lag = server.estimator.accel_lag
+    assert not server.estimator.phi.ready
+    # the board's millis() from 0 to 990 ms, each line received 100 s + its millis later on our
+    # clock (no transport delay): a roll ramp of 10 deg/s and a pitch of -3 deg
+    for millis in range(0, 1000, 10):
+        sample = AccelSample(millis, 2.0 + 0.01 * millis, -3.0, 100.0 + millis / 1000.0)
+        server._on_accel(sample)
+    # the newest sample counts at its board time mapped onto ours, less the filter's delay
+    assert server.estimator.phi.last_time == pytest.approx(100.99 - lag, abs=1e-9)
+    assert server.estimator.theta.last_time == pytest.approx(100.99 - lag, abs=1e-9)
+    pose = server.estimator.pose_at(100.5 - lag)
+    assert pose.phi == pytest.approx(2.0 + 5.0, abs=1e-6)  # the roll ramp at millis 500
+    assert pose.theta == pytest.approx(-3.0, abs=1e-6)
+
+
+def test_a_late_board_line_counts_when_it_was_taken() -> None:
+    # the least-delayed line fixes the board's clock offset; a line that arrives 80 ms late
+    # still counts at its own millis(), not when it arrived
+    server = ControlServer(None, None, accel=object(), config=ControlConfig(attitude="accel"))
+    lag = server.estimator.accel_lag
+    server._on_accel(AccelSample(1000, 1.0, 0.0, 50.0))
+    server._on_accel(AccelSample(1010, 1.0, 0.0, 50.09))
+    assert server.estimator.phi.last_time == pytest.approx(50.01 - lag, abs=1e-4)
+
+
+# --- the platform task ----------------------------------------------------------------------------
+class SlowPlatform(PlatformClient):
+    """A real Modbus client of the simulator whose state reads take ``delay`` s longer (a slow
+    link), and which notes when each heartbeat and state read was sent and answered."""
+
+    def __init__(self, host: str, port: int, delay: float = 0.0) -> None:
+        super().__init__(host, port)
+        self.delay = delay
+        self.beats: list[float] = []
+        self.reads: list[tuple[float, float]] = []
+
+    async def heartbeat(self) -> None:
+        self.beats.append(time.monotonic())
+        await super().heartbeat()
+
+    async def read_state(self) -> PlatformState:
+        sent = time.monotonic()
+        await asyncio.sleep(self.delay)
+        state = await super().read_state()
+        self.reads.append((sent, time.monotonic()))
+        return state
+
+
+@pytest.fixture
+async def plc_port() -> AsyncIterator[int]:
+    async with PlatformSimulator(PlatformConfig(port=0, accel=False, seed=3)) as sim:
+        yield sim.port
+
+
+async def _run_platform_task(server: ControlServer, until: object, timeout: float = 10.0) -> None:
+    task = asyncio.create_task(server._platform_task())
+    try:
+        async with asyncio.timeout(timeout):
+            while not until():  # type: ignore[operator]  # noqa: ASYNC110 (plain lists: polled)
+                await asyncio.sleep(0.01)
+    finally:
+        server._stopping = True
+        async with asyncio.timeout(timeout):
+            await task
+
+
+async def test_platform_task_beats_the_watchdog_every_quarter_second(plc_port: int) -> None:
+    plc = await SlowPlatform("127.0.0.1", plc_port).connect()
+    try:
+        server = ControlServer(None, plc, None, config=ControlConfig(attitude="plc"))
+        await _run_platform_task(server, lambda: len(plc.beats) >= 3)
+    finally:
+        plc.close()
+    # no waves: a heartbeat at once, then one every 0.25 s of the 50 Hz loop, not every pass
+    gaps = np.diff(plc.beats)
+    assert np.all(gaps >= 0.2), gaps
+    assert np.all(gaps <= 1.0), gaps  # well inside the PLC's 1 s watchdog, also on a busy machine
+    assert len(plc.reads) > len(plc.beats)
+    assert server._first_state.is_set() and len(server.platform_rows) == len(plc.reads)
+
+
+async def test_platform_task_keeps_its_period_whatever_the_link_takes(plc_port: int) -> None:
+    # each read takes 50 ms more: the task sleeps the rest of its 80 ms period, no longer
+    plc = await SlowPlatform("127.0.0.1", plc_port, delay=0.05).connect()
+    period = 0.08
+    try:
+        server = ControlServer(
+            None, plc, None, config=ControlConfig(attitude="plc", platform_period=period)
+        )
+        await _run_platform_task(server, lambda: len(plc.reads) >= 7)
+    finally:
+        plc.close()
+    sent = np.array([s for s, _ in plc.reads])
+    link = np.array([done - s for s, done in plc.reads])
+    gaps = np.diff(sent)
+    assert np.median(gaps) >= 0.9 * period, gaps  # it waits out its period ...
+    # ... counting the time the link took: a loop that slept a whole period after each read
+    # would come round a period plus a read later (waking late on a busy machine adds to both)
+    assert np.median(gaps) - period < np.median(link), (gaps, link)
+
+
+# --- prediction -----------------------------------------------------------------------------------
+def _server_rising(lead: float | None = None) -> ControlServer:
+    """A law at THETA0 and a platform whose heave rose at 10 mm/s until its stream stopped."""
+    server = ControlServer(None, None, config=ControlConfig(attitude="plc", lead=lead))
+    server.law = ControlLaw(server.config, THETA0)
+    for k in range(20):  # 50 Hz samples up to t = 0.38 s, then nothing more
+        server.estimator.add_plc(0.02 * k, 10.0 * 0.02 * k, 0.0, 0.0)
+    server.set_compensation(True)
+    return server
+
+
+@pytest.mark.parametrize("t", [0.8, 3.0])
+def test_a_stale_platform_stream_is_not_extrapolated_past_max_lead(t: float) -> None:
+    max_lead = ControlConfig().max_lead
+    # a 50 ms step: the smoother reaches these few millimetres of target in one step
+    held = _server_rising()
+    target_held = held._control_step(0.38 + max_lead, 0.05, THETA0)
+    late = _server_rising()
+    target_late = late._control_step(t, 0.05, THETA0)
+    # "now" stops at the newest sample + max_lead, and so does the predicted pose
+    assert late.rows[-1]["est_z"] == pytest.approx(10.0 * (0.38 + max_lead), abs=1e-6)
+    assert target_late == pytest.approx(target_held, abs=1e-9)
+
+
+# --- stop() ---------------------------------------------------------------------------------------
+class CountingOperator(OperatorInput):
+    def __init__(self) -> None:
+        self.polls = 0
+        self.closed = False
+
+    def poll(self, t: float) -> OperatorCommand:
+        self.polls += 1
+        return OperatorCommand()
+
+    def close(self) -> None:
+        self.closed = True
+
+
+async def test_stop_lets_a_request_in_flight_finish() -> None:
+    server = ControlServer(None, None, config=ControlConfig(attitude="plc"))
+    operator = server.operator = CountingOperator()
+    answered = asyncio.Event()
+    done: list[str] = []
+
+    async def request_in_flight() -> None:
+        while not server._stopping:  # like the I/O tasks: one request per pass
+            await answered.wait()
+        done.append("answered")
+
+    server._tasks = [
+        asyncio.create_task(server._guard(request_in_flight())),
+        asyncio.create_task(server._guard(server._operator_task())),
+    ]
+    await asyncio.sleep(0)
+    stopping = asyncio.create_task(server.stop(timeout=30.0))
+    await asyncio.sleep(0.05)
+    assert not stopping.done()  # it waits for the answer, it does not cut the request
+    answered.set()
+    async with asyncio.timeout(10.0):
+        await stopping
+    assert done == ["answered"] and server._tasks == [] and operator.closed
+    assert operator.polls >= 1
+
+
+async def test_stop_cancels_a_task_that_hangs_after_its_timeout() -> None:
+    server = ControlServer(None, None, config=ControlConfig(attitude="plc"))
+    cancelled = asyncio.Event()
+
+    async def hangs() -> None:
+        try:
+            await asyncio.Event().wait()  # a peer that never answers
+        except asyncio.CancelledError:
+            cancelled.set()
+            raise
+
+    task = asyncio.create_task(server._guard(hangs()))
+    server._tasks = [task]
+    await asyncio.sleep(0)
+    started = time.monotonic()
+    async with asyncio.timeout(10.0):
+        await server.stop(timeout=0.1)  # no CancelledError leaks out of stop()
+    assert time.monotonic() - started >= 0.1
+    assert cancelled.is_set() and task.cancelled() and server.error is None
+    assert server._tasks == []
