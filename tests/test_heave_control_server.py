@@ -119,13 +119,21 @@ async def test_tasks_hold_the_start_pose_and_log_the_platform(
     assert sim.accel_path is not None
     reader = await AccelReader(sim.accel_path).open()
     try:
-        server = ControlServer(kvp, plc, reader, config=ControlConfig(attitude="fused"))
+        # the robot stands on the platform, its base 100 mm above the platform's origin
+        mount = np.eye(4)
+        mount[2, 3] = 100.0
+        server = ControlServer(
+            kvp, plc, reader, config=ControlConfig(attitude="fused"), mount=mount
+        )
         lag = server.lag = RecordingLag(server.lag.value)
         await server.start(wave_t0=123.0)  # it waits for the board's samples to reach the estimate
         assert server.wave_t0 == 123.0 and server.law is not None
         assert reader.on_sample is not None and server.estimator.ready
+        assert sorted(t.get_name() for t in server._tasks) == ["actuation", "operator", "platform"]
         pose = await kvp.read_value("$POS_ACT")  # the law starts where the robot stands
         assert server.law.base0[:3] == pytest.approx([pose.x, pose.y, pose.z], abs=0.5)
+        # ... and holds its flange where it is in the world: on the mount, the platform level
+        assert server.law.x_s0 == pytest.approx([pose.x, pose.y, pose.z + 100.0], abs=0.5)
         await _wait(lambda: len(server.rows) >= 5 and len(server.platform_rows) >= 5, "rows")
         await server.stop()
     finally:
@@ -133,8 +141,8 @@ async def test_tasks_hold_the_start_pose_and_log_the_platform(
     row = server.platform_rows[-1]
     assert set(row) == {"t", "heave", "roll", "pitch", "status", "beta1", "beta2", "beta3"}
     assert abs(row["heave"]) < 1.0  # no waves: the platform stands still
-    # the board sees the level plate too (its noise averaged by the fusion)
-    assert np.all(np.abs(server.estimator.offset) < 0.5)
+    # the board sees the level plate too: the fused offset is within its noise (0.01 g a sample)
+    assert np.all(np.abs(server.estimator.offset) < 2.0), server.estimator.offset
     ts = [r["t"] for r in server.rows]
     assert ts == sorted(ts) and all(r["comp"] == 0.0 for r in server.rows)
     # the robot was sent the start pose: compensation off, stick centred
@@ -168,6 +176,7 @@ async def test_operator_toggles_compensation_and_quits(
         kvp, plc, None, operator=operator, config=ControlConfig(attitude="plc"), waves=waves
     )
     await server.start()
+    assert server.platform_rows  # started once the platform had answered
     async with asyncio.timeout(10.0):
         await server.quit.wait()  # the operator's quit
     assert server.compensate  # toggled on by the first poll

@@ -24,7 +24,82 @@ from pyopenshowvar_apps.heave.operator import OperatorCommand, OperatorInput
 from pyopenshowvar_apps.heave.registers import PlatformState
 from pyopenshowvar_apps.heave.simulator import PlatformConfig, PlatformSimulator
 
+from kukavarproxy_emu.testing import EmulatorFactory
+from pyopenshowvar import Client
+
 THETA0 = np.array([20.0, -80.0, 100.0, 15.0, 55.0, 20.0])
+
+
+# --- start-up waits --------------------------------------------------------------------------------
+# a controller whose heave data list is loaded but whose program has not said it is ready
+_NOT_READY = "DECL GLOBAL BOOL HEAVE_READY=FALSE\n"
+
+
+async def test_waiting_for_the_robot_program_times_out_naming_its_flag(
+    emulator_factory: EmulatorFactory,
+) -> None:
+    emu = await emulator_factory(dat_text=_NOT_READY, robot=False)
+    async with Client("127.0.0.1", emu.port, timeout=2.0) as kvp:
+        server = ControlServer(kvp, None, config=ControlConfig(attitude="plc"))
+        started = time.monotonic()
+        with pytest.raises(
+            TimeoutError,
+            match=r"^HEAVE_READY did not become TRUE within 0\.2 s: is heave\.src running\?$",
+        ):
+            await server.wait_robot_ready(timeout=0.2)
+        assert time.monotonic() - started >= 0.2
+
+
+async def test_the_robot_program_is_seen_ready_at_the_next_poll(
+    emulator_factory: EmulatorFactory,
+) -> None:
+    emu = await emulator_factory(dat_text=_NOT_READY, robot=False)
+    async with Client("127.0.0.1", emu.port, timeout=2.0) as kvp:
+        server = ControlServer(kvp, None, config=ControlConfig(attitude="plc"))
+        waiting = asyncio.create_task(server.wait_robot_ready(timeout=10.0))
+        await asyncio.sleep(0.1)
+        assert not waiting.done()  # FALSE: still waiting
+        await kvp.write("HEAVE_READY", "TRUE")
+        set_at = time.monotonic()
+        async with asyncio.timeout(10.0):
+            theta0 = await waiting
+        # polled every 50 ms: seen within half a second, also on a busy machine
+        assert time.monotonic() - set_at < 0.5
+        axes = await kvp.read_value("$AXIS_ACT")
+        assert theta0 == pytest.approx([axes.a1, axes.a2, axes.a3, axes.a4, axes.a5, axes.a6])  # type: ignore[union-attr]
+
+
+async def test_a_start_the_platform_fails_raises_its_error_and_leaves_no_task(
+    emulator_factory: EmulatorFactory,
+) -> None:
+    emu = await emulator_factory(dat_text="DECL GLOBAL BOOL HEAVE_READY=TRUE\n", robot=False)
+    async with PlatformSimulator(PlatformConfig(port=0, accel=False, seed=3)) as sim:
+        plc = await PlatformClient("127.0.0.1", sim.port).connect()
+    # the PLC went away after the connection was made: the platform task's first read fails
+    try:
+        async with Client("127.0.0.1", emu.port, timeout=2.0) as kvp:
+            server = ControlServer(kvp, plc, None, config=ControlConfig(attitude="plc"))
+            started = time.monotonic()
+            with pytest.raises(ConnectionError, match="platform PLC"):
+                await server.start()
+            # at once (not after the 5 s allowed for a first answer), and nothing left running
+            assert time.monotonic() - started < 4.0
+            assert server._tasks == []
+            assert not [t for t in asyncio.all_tasks() if t.get_name() == "platform"]
+    finally:
+        plc.close()
+
+
+async def test_waiting_for_a_data_source_polls_until_it_answers() -> None:
+    polls: list[float] = []
+
+    def answers_at_the_fourth_poll() -> bool:
+        polls.append(time.monotonic())
+        return len(polls) >= 4
+
+    # polled every 10 ms within the 2 s it is given: three waits, not three seconds
+    await ControlServer._wait_for(answers_at_the_fourth_poll, 2.0, "the accelerometer stream")
+    assert len(polls) == 4
 
 
 # --- the accelerometer path -----------------------------------------------------------------------
