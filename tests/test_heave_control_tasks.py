@@ -1,9 +1,10 @@
 """The heave control server's own duties, each in well under a second and without a robot
-where none is needed: the accelerometer samples it feeds to the estimator (the board's clock
-mapped onto ours, roll and pitch), the platform task's heartbeat and period against the real
-platform simulator over Modbus TCP, a prediction that stops at ``max_lead`` past a stale
-platform stream, and ``stop()``: requests in flight finish, a task that hangs is cancelled
-after the timeout.
+where none is needed: the start-up waits (the program's ready flag on a static emulator, a
+platform that fails its first read), the accelerometer samples it feeds to the estimator (the
+board's clock mapped onto ours, roll and pitch), the platform task's heartbeat and period
+against the real platform simulator over Modbus TCP, a prediction that stops at ``max_lead``
+past a stale platform stream, and ``stop()``: requests in flight finish, a task that hangs is
+cancelled after the timeout.
 
 The tasks against the robot (start-up, the target the robot follows, the lag estimator's feed)
 are in tests/test_heave_control_server.py.
