@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import itertools
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -145,6 +146,10 @@ async def test_tasks_hold_the_start_pose_and_log_the_platform(
     assert np.all(np.abs(server.estimator.offset) < 2.0), server.estimator.offset
     ts = [r["t"] for r in server.rows]
     assert ts == sorted(ts) and all(r["comp"] == 0.0 for r in server.rows)
+    # each step's time step is the time since the previous step's angles came back
+    rows = list(server.rows)
+    for before, row in itertools.pairwise(rows):
+        assert row["dt"] == pytest.approx(row["t"] - before["t"], abs=1e-9)
     # the robot was sent the start pose: compensation off, stick centred
     target = await kvp.read_value("HEAVE_TGT")
     got = np.array([target.x, target.y, target.z, target.a, target.b, target.c])
