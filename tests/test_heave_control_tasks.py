@@ -18,12 +18,14 @@ from collections.abc import AsyncIterator
 
 import numpy as np
 import pytest
-from pyopenshowvar_apps.heave.accel import AccelSample
+from pyopenshowvar_apps.heave.accel import AccelReader, AccelSample
 from pyopenshowvar_apps.heave.control import ControlConfig, ControlLaw, ControlServer
+from pyopenshowvar_apps.heave.geometry import PlatformPose
 from pyopenshowvar_apps.heave.master import PlatformClient
 from pyopenshowvar_apps.heave.operator import OperatorCommand, OperatorInput
 from pyopenshowvar_apps.heave.registers import PlatformState
 from pyopenshowvar_apps.heave.simulator import PlatformConfig, PlatformSimulator
+from pyopenshowvar_apps.heave.waves import WaveGenerator
 
 from kukavarproxy_emu.testing import EmulatorFactory
 from pyopenshowvar import Client
@@ -91,6 +93,35 @@ async def test_a_start_the_platform_fails_raises_its_error_and_leaves_no_task(
         plc.close()
 
 
+async def test_a_fused_attitude_starts_only_once_the_board_has_spoken(
+    emulator_factory: EmulatorFactory, plc_port: int
+) -> None:
+    ready = "DECL GLOBAL BOOL HEAVE_READY=TRUE\nDECL GLOBAL FRAME HEAVE_TGT={X 0.0}\n"
+    emu = await emulator_factory(dat_text=ready, robot=False)
+    plc = await PlatformClient("127.0.0.1", plc_port).connect()
+    board = AccelReader("/dev/null")  # its lines are handed over below, as its device would
+    try:
+        async with Client("127.0.0.1", emu.port, timeout=2.0) as kvp:
+            server = ControlServer(kvp, plc, board, config=ControlConfig(attitude="fused"))
+            starting = asyncio.create_task(server.start())
+            await _wait_for_rows(server)
+            await asyncio.sleep(0.1)
+            assert not starting.done()  # the PLC answers, the board has not spoken yet
+            board.feed(b"1000,0.000,0.000\n", time.monotonic())
+            async with asyncio.timeout(10.0):
+                await starting
+            assert server.estimator.ready
+            await server.stop()
+    finally:
+        plc.close()
+
+
+async def _wait_for_rows(server: ControlServer) -> None:
+    async with asyncio.timeout(10.0):
+        while not server.platform_rows:  # noqa: ASYNC110 (a plain deque: polled)
+            await asyncio.sleep(0.01)
+
+
 async def test_waiting_for_a_data_source_polls_until_it_answers() -> None:
     polls: list[float] = []
 
@@ -142,23 +173,35 @@ class SlowPlatform(PlatformClient):
         self.delay = delay
         self.beats: list[float] = []
         self.reads: list[tuple[float, float]] = []
+        self.states: list[PlatformState] = []
+        self.set_points: list[tuple[float, PlatformPose]] = []
 
     async def heartbeat(self) -> None:
         self.beats.append(time.monotonic())
         await super().heartbeat()
+
+    async def set_pose(self, pose: PlatformPose) -> None:
+        self.set_points.append((time.monotonic(), pose))
+        await super().set_pose(pose)
 
     async def read_state(self) -> PlatformState:
         sent = time.monotonic()
         await asyncio.sleep(self.delay)
         state = await super().read_state()
         self.reads.append((sent, time.monotonic()))
+        self.states.append(state)
         return state
 
 
 @pytest.fixture
-async def plc_port() -> AsyncIterator[int]:
+async def sim() -> AsyncIterator[PlatformSimulator]:
     async with PlatformSimulator(PlatformConfig(port=0, accel=False, seed=3)) as sim:
-        yield sim.port
+        yield sim
+
+
+@pytest.fixture
+def plc_port(sim: PlatformSimulator) -> int:
+    return sim.port
 
 
 async def _run_platform_task(server: ControlServer, until: object, timeout: float = 10.0) -> None:
@@ -186,6 +229,51 @@ async def test_platform_task_beats_the_watchdog_every_quarter_second(plc_port: i
     assert np.all(gaps <= 1.0), gaps  # well inside the PLC's 1 s watchdog, also on a busy machine
     assert len(plc.reads) > len(plc.beats)
     assert server._first_state.is_set() and len(server.platform_rows) == len(plc.reads)
+
+
+async def test_platform_task_logs_each_state_and_keeps_the_newest_rows(
+    sim: PlatformSimulator,
+) -> None:
+    # the plate tilting towards roll 3 deg, pitch -2 deg: its three legs at different angles
+    sim.plc.sp_pose = PlatformPose(5.0, 3.0, -2.0)
+    sim.plc.set_enable(True)
+    plc = await SlowPlatform("127.0.0.1", sim.port).connect()
+    try:
+        server = ControlServer(None, plc, None, config=ControlConfig(attitude="plc"), max_rows=4)
+        await _run_platform_task(server, lambda: len(plc.reads) >= 8)
+    finally:
+        plc.close()
+    assert len(server.platform_rows) == 4  # a bounded log: the newest rows
+    for row, state in zip(server.platform_rows, plc.states[-4:], strict=True):
+        assert (row["heave"], row["roll"], row["pitch"]) == (state.heave, state.roll, state.pitch)
+        assert (row["beta1"], row["beta2"], row["beta3"]) == state.beta
+        assert row["status"] == float(state.status)
+    assert len({*plc.states[-1].beta}) == 3  # the legs did differ
+
+
+async def test_platform_task_sends_the_waves_of_its_own_time(plc_port: int) -> None:
+    plc = await SlowPlatform("127.0.0.1", plc_port).connect()
+    waves = WaveGenerator.random(5)
+    try:
+        server = ControlServer(None, plc, None, config=ControlConfig(attitude="plc"), waves=waves)
+        server.wave_t0 = time.monotonic() - 30.0  # 30 s into the waves
+        await _run_platform_task(server, lambda: len(plc.set_points) >= 5)
+    finally:
+        plc.close()
+    assert not plc.beats  # the set-points feed the watchdog: no heartbeat needed
+    for sent, pose in plc.set_points:
+        # the wave pose at the pass's own time (taken a moment before the request went out)
+        due = waves.pose(sent - server.wave_t0)
+        assert (pose.z, pose.phi, pose.theta) == pytest.approx((due.z, due.phi, due.theta), abs=0.5)
+
+
+def test_the_control_log_keeps_the_newest_rows() -> None:
+    server = ControlServer(None, None, config=ControlConfig(attitude="plc"), max_rows=3)
+    server.law = ControlLaw(server.config, THETA0)
+    server.estimator.add_plc(0.0, 0.0, 0.0, 0.0)
+    for k in range(1, 6):
+        server._control_step(0.02 * k, 0.02, THETA0)
+    assert [r["t"] for r in server.rows] == pytest.approx([0.06, 0.08, 0.1])
 
 
 async def test_platform_task_keeps_its_period_whatever_the_link_takes(plc_port: int) -> None:
