@@ -34,42 +34,41 @@ THETA0 = np.array([20.0, -80.0, 100.0, 15.0, 55.0, 20.0])
 
 
 # --- start-up waits --------------------------------------------------------------------------------
-# a controller whose heave data list is loaded but whose program has not said it is ready
-_NOT_READY = "DECL GLOBAL BOOL HEAVE_READY=FALSE\n"
+@pytest.fixture
+async def not_ready(emulator_factory: EmulatorFactory) -> AsyncIterator[ControlServer]:
+    """A server on a controller whose heave data list is loaded but whose program has not said
+    it is ready."""
+    emu = await emulator_factory(dat_text="DECL GLOBAL BOOL HEAVE_READY=FALSE\n", robot=False)
+    async with Client("127.0.0.1", emu.port, timeout=2.0) as kvp:
+        yield ControlServer(kvp, None, config=ControlConfig(attitude="plc"))
 
 
 async def test_waiting_for_the_robot_program_times_out_naming_its_flag(
-    emulator_factory: EmulatorFactory,
+    not_ready: ControlServer,
 ) -> None:
-    emu = await emulator_factory(dat_text=_NOT_READY, robot=False)
-    async with Client("127.0.0.1", emu.port, timeout=2.0) as kvp:
-        server = ControlServer(kvp, None, config=ControlConfig(attitude="plc"))
-        started = time.monotonic()
-        with pytest.raises(
-            TimeoutError,
-            match=r"^HEAVE_READY did not become TRUE within 0\.2 s: is heave\.src running\?$",
-        ):
-            await server.wait_robot_ready(timeout=0.2)
-        assert time.monotonic() - started >= 0.2
+    server = not_ready
+    started = time.monotonic()
+    with pytest.raises(
+        TimeoutError,
+        match=r"^HEAVE_READY did not become TRUE within 0\.2 s: is heave\.src running\?$",
+    ):
+        await server.wait_robot_ready(timeout=0.2)
+    assert time.monotonic() - started >= 0.2
 
 
-async def test_the_robot_program_is_seen_ready_at_the_next_poll(
-    emulator_factory: EmulatorFactory,
-) -> None:
-    emu = await emulator_factory(dat_text=_NOT_READY, robot=False)
-    async with Client("127.0.0.1", emu.port, timeout=2.0) as kvp:
-        server = ControlServer(kvp, None, config=ControlConfig(attitude="plc"))
-        waiting = asyncio.create_task(server.wait_robot_ready(timeout=10.0))
-        await asyncio.sleep(0.1)
-        assert not waiting.done()  # FALSE: still waiting
-        await kvp.write("HEAVE_READY", "TRUE")
-        set_at = time.monotonic()
-        async with asyncio.timeout(10.0):
-            theta0 = await waiting
-        # polled every 50 ms: seen within half a second, also on a busy machine
-        assert time.monotonic() - set_at < 0.5
-        axes = await kvp.read_value("$AXIS_ACT")
-        assert theta0 == pytest.approx([axes.a1, axes.a2, axes.a3, axes.a4, axes.a5, axes.a6])  # type: ignore[union-attr]
+async def test_the_robot_program_is_seen_ready_at_the_next_poll(not_ready: ControlServer) -> None:
+    server, kvp = not_ready, not_ready.kvp
+    waiting = asyncio.create_task(server.wait_robot_ready(timeout=10.0))
+    await asyncio.sleep(0.1)
+    assert not waiting.done()  # FALSE: still waiting
+    await kvp.write("HEAVE_READY", "TRUE")
+    set_at = time.monotonic()
+    async with asyncio.timeout(10.0):
+        theta0 = await waiting
+    # polled every 50 ms: seen within half a second, also on a busy machine
+    assert time.monotonic() - set_at < 0.5
+    axes = await kvp.read_value("$AXIS_ACT")
+    assert theta0 == pytest.approx([axes.a1, axes.a2, axes.a3, axes.a4, axes.a5, axes.a6])
 
 
 async def test_a_start_the_platform_fails_raises_its_error_and_leaves_no_task(
