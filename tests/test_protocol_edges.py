@@ -317,3 +317,21 @@ def test_frames_split_anywhere_and_eof_mid_frame() -> None:
     assert dec.buffered == 0
     dec.eof()  # the buffer was dropped with the error
     assert dec.feed_replies(H("0001 0000")) == [Reply(1, None, b"", 0, b"")]
+
+
+def test_each_refusal_names_the_part_that_is_too_long() -> None:
+    # a value that fits its own 16-bit block but not the frame around it: the frame is named,
+    # with its real size (mode 1 + name block 3 + value block 2 + 65535)
+    with raises("frame content of 65541 bytes exceeds 65535"):
+        encode_write(2, "A", "1" * 0xFFFF)
+    with raises("frame content of 65541 bytes exceeds 65535"):
+        encode_reply(Reply(1, 0, b"v" * 0xFFFF))
+    # the name block of an array write names the name, not the words
+    with raises("name of 65536 bytes exceeds 65535"):
+        encode_write_array(3, "A" * 0x10000, [1])
+
+
+def test_c3_replies_take_every_status_byte() -> None:
+    # C3 Bridge types take the checked path: its status bound is 0..255 inclusive, like KVP's
+    assert encode_reply(Reply(5, 4, b"", 255, H("0009"))) == H("0005 0004 04 0009 FF")
+    assert encode_reply(Reply(5, 4, b"", 0, H("0009"))) == H("0005 0004 04 0009 00")

@@ -248,6 +248,64 @@ def test_the_longest_generated_name_decides_the_snapshot_name() -> None:
         Snapshot("X" * 21, ["$OV_PRO"])
 
 
+def test_a_nested_part_checks_the_snapshot_name_too() -> None:
+    # one member whose flat STRUC line is already past the limit: the first part is nested, and
+    # its longest name is still NAME_SPS (the group type NAME_T1 is one character shorter)
+    one = [("LONG_VARIABLE_NAME_24CHR", "SOME_LONG_USER_TYPE_NAME")]
+    lim = SnapshotLimits(struc_line=80)
+    assert [t.name for t in Snapshot("X" * 20, one, limits=lim).parts[0].types] == [
+        "X" * 20 + "_T1",
+        "X" * 20 + "_T",
+    ]
+    with pytest.raises(
+        ValueError, match=r"snapshot name 'X{21}' is too long: it makes 'X{21}_SPS'"
+    ):
+        Snapshot("X" * 21, one, limits=lim)
+
+
+_LONG = [(f"A_LONG_MEMBER_NAME_{k:02d}", "REAL") for k in range(1, 16)]
+
+
+def test_a_group_closes_when_its_own_line_would_pass_the_limit() -> None:
+    # CELL_T1 with a third member would be 86 characters: the group closes at two, by the
+    # length of its own name (a shorter name would have let the third member in)
+    snap = Snapshot("CELL", _LONG[:3], limits=SnapshotLimits(struc_line=84))
+    (part,) = snap.parts
+    assert [(t.name, len(t.members)) for t in part.types] == [
+        ("CELL_T1", 2),
+        ("CELL_T2", 1),
+        ("CELL_T", 3),
+    ]
+    third = part.types[1].members[0]
+    assert len(struc_line(StrucType("CELL_T1", (*part.types[0].members, third)))) == 86
+    assert all(len(struc_line(t)) <= 84 for t in part.types)
+
+
+def test_the_top_structure_may_fill_its_line_exactly() -> None:
+    # seven groups of two make a top line "STRUC N_T INT CYCLE, N_T1 G1, ..., N_T7 G7" of 82
+    # characters: at struc_line=82 all 13 members fit one read, with one more they do not
+    lim = SnapshotLimits(struc_line=82)
+    snap = Snapshot("N", _LONG[:13], limits=lim)
+    assert snap.read_names == ("N",)
+    top = snap.parts[0].types[-1]
+    assert len(struc_line(top)) == 82 and len(top.members) == 8
+    assert Snapshot("N", _LONG[:14], limits=lim).read_names == ("N",)
+    assert Snapshot("N", _LONG[:15], limits=lim).read_names == ("N", "N2")
+
+
+def test_a_blank_inside_a_member_type_still_declares_an_array() -> None:
+    # the type registry keeps "REAL [3]" as written (blanks folded to one)
+    reg = BUILTIN_TYPES.copy()
+    reg.add_struct("HOLDER", (("V", "REAL [3]"),))
+    with pytest.raises(ValueError, match="STRUC HOLDER holds an array"):
+        resolve_variable("H", "HOLDER", set(), reg, SnapshotLimits())
+    # ... and text written "CHAR [8]" is still text, which a STRUC may hold
+    reg.add_struct("TEXTY", (("LABEL", "CHAR [8]"), ("V", "REAL")))
+    assert (
+        resolve_variable("T", "TEXTY", set(), reg, SnapshotLimits()).slots[0].type_name == "TEXTY"
+    )
+
+
 def _text_estimate(part) -> int:  # type: ignore[no-untyped-def]
     """The documented worst case of one part's reply: its slots, "{TYPE: CYCLE n, ...}" and,
     when nested, "Gk {TYPE: ...}, " per group."""

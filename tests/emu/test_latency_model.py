@@ -199,7 +199,8 @@ async def test_queue_books_from_the_arrival_and_keeps_its_books() -> None:
     now = time.monotonic()
     # bytes read 1 s ago: the deadline passed long since, the reply is computed at once
     assert await queue.run("write", lambda: "x", arrival=now - 1.0) == "x"
-    assert queue.scheduler.free_at == pytest.approx(now - 1.0 + 0.07)  # a write's service time
+    # a write's service time, not a read's (the clock reads ~1e5 s: compare the difference)
+    assert queue.scheduler.free_at - (now - 1.0) == pytest.approx(0.07, abs=1e-9)
     assert queue.served == 1 and list(queue.pending) == []
     assert queue.last_reply >= now and len(queue.late) == 1 and 0.9 < queue.late[0] < 1.5
     # an arrival in the future is taken as now: never a reply before its service time
@@ -290,6 +291,8 @@ async def test_tick_gate_keeps_one_and_a_half_ticks_and_a_margin_before_a_reply(
         assert not gate((remaining - latency.TICK_MARGIN / 2) / 1.5)
         assert not gate(remaining)
         assert gate((remaining - 2.0) / 1.5)  # 3 s of 1.5-fold cost before a 5 s reply: runs
+        # a tick costing half the time left: 1.5-fold it fits before the reply and runs
+        assert gate(remaining / 2)
     finally:
         task.cancel()
         with pytest.raises(asyncio.CancelledError):

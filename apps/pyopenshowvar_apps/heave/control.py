@@ -264,6 +264,10 @@ class ControlServer:
             await asyncio.sleep(0.05)
 
     async def start(self, *, wave_t0: float | None = None) -> None:
+        """Start the tasks once the robot program is ready, the platform has answered and (unless
+        the attitude is the PLC's alone) the board's samples arrive. A start that fails raises
+        the platform's own error (or a TimeoutError naming what did not answer) and leaves no
+        task running: nothing keeps driving the platform for a server nobody got to stop."""
         theta0 = await self.wait_robot_ready()
         self.law = ControlLaw(self.config, theta0, self.mount)
         self.wave_t0 = time.monotonic() if wave_t0 is None else wave_t0
@@ -271,15 +275,34 @@ class ControlServer:
             self.accel.on_sample = self._on_accel
         loop = asyncio.get_running_loop()
         self._tasks = [loop.create_task(self._guard(self._platform_task()), name="platform")]
-        await asyncio.wait_for(self._first_state.wait(), 5.0)
-        if self.config.attitude != "plc":
-            await self._wait_for(lambda: self.estimator.ready, 3.0, "the accelerometer stream")
+        try:
+            # a failed first request ends the platform task: its error, not a wait of 5 s
+            await self._wait_for(
+                lambda: self._first_state.is_set() or self.error is not None,
+                5.0,
+                "the platform PLC",
+            )
+            if self.error is not None:
+                raise self.error
+            if self.config.attitude != "plc":
+                await self._wait_for(lambda: self.estimator.ready, 3.0, "the accelerometer stream")
+        except BaseException:
+            await self._end_tasks(3.0)
+            raise
         self._tasks += [
             loop.create_task(self._guard(self._actuation_task(theta0)), name="actuation"),
             loop.create_task(self._guard(self._operator_task()), name="operator"),
         ]
 
     async def stop(self, timeout: float = 3.0) -> None:
+        """End the tasks (see :meth:`_end_tasks`), release the input device and raise the error
+        that stopped a task, if one did."""
+        await self._end_tasks(timeout)
+        self.operator.close()
+        if self.error is not None:
+            raise self.error
+
+    async def _end_tasks(self, timeout: float) -> None:
         """Let the I/O tasks finish their request in flight (a request cancelled half-way would
         leave its late answer to confuse the next one), then cancel whatever still runs."""
         self._stopping = True
@@ -291,9 +314,6 @@ class ControlServer:
             with contextlib.suppress(asyncio.CancelledError):
                 await task
         self._tasks.clear()
-        self.operator.close()
-        if self.error is not None:
-            raise self.error
 
     @property
     def compensate(self) -> bool:
