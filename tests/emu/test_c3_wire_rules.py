@@ -12,12 +12,14 @@ import random
 import struct
 import time
 from collections.abc import Iterator
+from typing import Any
 
 import pytest
 
 from kukavarproxy_emu import Emulator
 from kukavarproxy_emu.abuse import big_module
 from kukavarproxy_emu.c3 import HANDLED, VERSION, C3Session
+from kukavarproxy_emu.c3 import control as c3_control
 from kukavarproxy_emu.testing import EmulatorFactory, RawClient, wait_until
 from pyopenshowvar.c3.constants import ErrorCode
 from pyopenshowvar.c3.files import FileWriteBegin, FileWriteData
@@ -705,7 +707,22 @@ async def test_an_emulator_error_is_error_general_and_logged(
         assert await raw.request(motion) == answer(1, 11, H("02"), ErrorCode.GENERAL)  # echoed
         bench = frame(2, 17, H("00 01 00000001") + W("RULE_A"))
         assert await raw.request(bench) == answer(2, 17, b"", ErrorCode.GENERAL)  # nothing
-        # a motion that waits for a select still loading, and then fails
+        # a motion that waits for a select still loading, and then fails: the select's load
+        # is held until the motion waits behind it (a 5000-line module alone loaded faster
+        # than the test could see it loading on a quiet machine)
+        gate = asyncio.Event()
+        real_sliced, real_after = c3_control.run_sliced, c3.c3.control.after_select
+
+        async def held(*args: Any, **kwargs: Any) -> Any:
+            await gate.wait()
+            return await real_sliced(*args, **kwargs)
+
+        async def behind_the_select(action: Any) -> int:
+            gate.set()
+            return await real_after(action)
+
+        monkeypatch.setattr(c3_control, "run_sliced", held)
+        monkeypatch.setattr(c3.c3.control, "after_select", behind_the_select)
         c3.c3.vfs.write("KRC:\\R1\\Program\\SLOW.SRC", big_module("SLOW", 5000), overwrite=True)
         async with await RawClient.connect(c3.host, c3.port) as other:
             await other.send(ProgramSelect("/R1/SLOW").frame(1))
