@@ -216,7 +216,9 @@ def segment_box_distance(
     a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
     a, b, lo, hi = np.broadcast_arrays(a, b, lo, hi)
     d = b - a
-    with np.errstate(divide="ignore", invalid="ignore"):
+    # a zero or tiny component of d: no crossing, or one far beyond the segment (inf/overflow),
+    # both dropped below
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         cross = np.concatenate([(lo - a) / d, (hi - a) / d], axis=-1)
     cross = np.where(np.isfinite(cross), np.clip(cross, 0.0, 1.0), 0.0)
     ends = np.broadcast_to(np.array([0.0, 1.0]), (*cross.shape[:-1], 2))
