@@ -20,6 +20,8 @@ from kukavarproxy_emu import Emulator
 from kukavarproxy_emu.abuse import big_module
 from kukavarproxy_emu.c3 import HANDLED, VERSION, C3Session
 from kukavarproxy_emu.c3 import control as c3_control
+from kukavarproxy_emu.c3 import server as c3_server
+from kukavarproxy_emu.logsafe import RateLimitedLog
 from kukavarproxy_emu.testing import EmulatorFactory, RawClient, wait_until
 from pyopenshowvar.c3.constants import ErrorCode
 from pyopenshowvar.c3.files import FileWriteBegin, FileWriteData
@@ -695,6 +697,9 @@ async def test_an_emulator_error_is_error_general_and_logged(
     def broken(*args: object) -> int:
         raise RuntimeError("planted bug")
 
+    # a limiter of its own: the module's allows 5 such lines per 10 s per process, and tests run
+    # before this one in the same worker (or mutmut's run) may have used them up
+    monkeypatch.setattr(c3_server, "_limited", RateLimitedLog(c3_server.log))
     monkeypatch.setattr(c3.c3.control, "motion", broken_motion)
     monkeypatch.setattr(c3.c3, "tick_ms", broken_tick)
     monkeypatch.setattr(c3.c3.control, "key", broken)
