@@ -145,6 +145,11 @@ class Interpreter(SkipMixin, ExprMixin, MotionMixin):
     # --- driving -------------------------------------------------------------------------------
     def start(self) -> None:
         """(Re)start the main routine from its first statement."""
+        if self._gen is not None:
+            # Unwound now, while its frames are the ones on the stack: left to the garbage
+            # collector, its ``finally`` clauses popped frames of the new run (or an empty stack)
+            self._gen.close()
+            self._gen = None
         self.frames.clear()
         self.local_elements = 0
         self.finished = self.halted = False

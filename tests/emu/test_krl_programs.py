@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -14,6 +15,7 @@ from kukavarproxy_emu.__main__ import main
 from kukavarproxy_emu.config import EmulatorConfig
 from kukavarproxy_emu.krl.parser import KrlSyntaxError
 from kukavarproxy_emu.server import Emulator
+from kukavarproxy_emu.testing import EmulatorFactory
 from pyopenshowvar import Client
 from pyopenshowvar.kinematics import KR6R900SIXX, forward
 
@@ -229,3 +231,30 @@ async def _still(emu: Emulator) -> bool:
 async def _still_at(emu: Emulator, q: np.ndarray) -> bool:
     assert emu.robot is not None
     return await _still(emu) and bool(np.allclose(emu.robot.q, q, atol=1e-9))
+
+
+@pytest.mark.filterwarnings("error::pytest.PytestUnraisableExceptionWarning")
+async def test_restarting_a_running_submit_interpreter_leaves_no_stale_frames(
+    emulator_factory: EmulatorFactory,
+) -> None:
+    """The C3 cancel and start of the submit interpreter restart it while its main routine
+    runs: the old run is unwound at once. Left to the garbage collector, its ``finally``
+    clauses popped the new run's frames ("IndexError: pop from empty list", ignored)."""
+    import gc
+
+    from pyopenshowvar.c3 import Interpreter
+
+    emu = await emulator_factory(proxy="c3bridge", plant="ideal")
+    unraisable: list[object] = []
+    old_hook = sys.unraisablehook
+    sys.unraisablehook = unraisable.append
+    try:
+        async with Client(emu.host, emu.port) as kvp:
+            for _ in range(3):
+                await kvp.program_cancel(Interpreter.SUBMIT)
+                await kvp.program_start(Interpreter.SUBMIT)
+                gc.collect()
+                assert (await kvp.program_state()).submit_state == "P_ACTIVE"
+    finally:
+        sys.unraisablehook = old_hook
+    assert not unraisable, unraisable
