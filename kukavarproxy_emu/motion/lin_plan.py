@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from collections.abc import Callable, Generator
 from typing import TypeVar
 
@@ -92,7 +93,7 @@ class LinPlanner(Settings):
     ipo: float
     dynamics: ControllerDynamics | None
     active: list[Segment]
-    pending: object  # the kernel's deque of planned segments (only its truth is read here)
+    pending: deque[Segment]  # planned, not started (the kernel's queue)
     planned_q: FloatArray
     _frames: tuple[FloatArray, FloatArray]
 

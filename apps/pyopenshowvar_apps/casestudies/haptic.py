@@ -211,7 +211,7 @@ async def run_haptic(
     rows: list[dict[str, float]] = []
     info: dict[str, float] = {}
     try:
-        await world.start()
+        await world.release()
         if tilt:
             await leave_singularity(client, reader, clock)
         for i in range(1, 7):  # gentle from here on: calibration and hand guiding
@@ -234,7 +234,7 @@ async def run_haptic(
         )
     finally:
         await client.write("MYPOS", _mypos((0, 0, 0)))
-        await world.stop()
+        await world.release()
         for i, v in enumerate(str(old_acc).split()[:6], 1):
             await client.write(f"$ACC_AXIS[{i}]", v)
     info["consistent_frac"] = reader.consistent_fraction

@@ -99,11 +99,8 @@ class World:
         self.payload = np.array([0, 0, payload_kg * G, 0, 0, 0], float)
         self.applied = np.zeros(6)
 
-    async def start(self) -> None:
-        if self.environment is not None:
-            await self.apply(np.zeros(6))
-
-    async def stop(self) -> None:
+    async def release(self) -> None:
+        """No force on the robot (before the run and after it), where there is an environment."""
         if self.environment is not None:
             await self.apply(np.zeros(6))
 
